@@ -1,0 +1,46 @@
+"""sphjax: differentiable Smoothed Particle Hydrodynamics in JAX.
+
+Weakly compressible fluids and total-Lagrangian elastic solids as pure functions, so that
+``jax.jit``, ``jax.vmap`` and ``jax.grad`` pass through whole simulations.
+
+    import sphjax
+    case = sphjax.cases.taylor_green(n=50)
+    traj = sphjax.simulate(case, n_steps=1000, save_every=100)
+"""
+
+from sphjax import cases, kernels
+from sphjax.case import Case
+from sphjax.integrate import (
+    NeighborOverflowError,
+    SimulationError,
+    Trajectory,
+    kick_drift_kick,
+    simulate,
+)
+from sphjax.rhs import Neighbors, evaluate
+from sphjax.state import Domain, Kind, Model, Params, State, make_params, make_state
+from sphjax.timestep import stable_time_step
+
+__version__ = "0.1.0"
+
+__all__ = [
+    "Case",
+    "Domain",
+    "Kind",
+    "Model",
+    "NeighborOverflowError",
+    "Neighbors",
+    "Params",
+    "SimulationError",
+    "State",
+    "Trajectory",
+    "cases",
+    "evaluate",
+    "kernels",
+    "kick_drift_kick",
+    "make_params",
+    "make_state",
+    "simulate",
+    "stable_time_step",
+    "__version__",
+]

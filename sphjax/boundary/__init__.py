@@ -1,0 +1,1 @@
+"""Boundary treatments: dummy wall particles (Adami, Hu & Adams 2012)."""

@@ -1,0 +1,45 @@
+"""Ready-to-run set-ups: ``sphjax.cases.<name>(...) -> Case``.
+
+Each case takes a resolution argument and physical parameters with the defaults of
+VALIDATION.md, and returns a :class:`sphjax.Case` (initial State, static Model,
+differentiable Params, a stable time step and a default end time).
+"""
+
+from __future__ import annotations
+
+from sphjax.cases.fluid import (
+    dam_break,
+    hydrostatic_tank,
+    poiseuille,
+    poiseuille_startup_speed,
+    surge_front,
+    taylor_green,
+)
+
+CASES = {
+    "taylor_green": taylor_green,
+    "poiseuille": poiseuille,
+    "hydrostatic_tank": hydrostatic_tank,
+    "dam_break": dam_break,
+}
+
+
+def get(name: str, **kwargs):
+    """Build the case called ``name`` (see ``CASES``) with keyword arguments."""
+    try:
+        factory = CASES[name]
+    except KeyError:
+        raise ValueError(f"unknown case {name!r}; available cases: {', '.join(sorted(CASES))}") from None
+    return factory(**kwargs)
+
+
+__all__ = [
+    "CASES",
+    "get",
+    "taylor_green",
+    "poiseuille",
+    "poiseuille_startup_speed",
+    "hydrostatic_tank",
+    "dam_break",
+    "surge_front",
+]

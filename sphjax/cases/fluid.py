@@ -1,0 +1,260 @@
+"""Fluid validation cases (VALIDATION.md, "Fluid cases")."""
+
+from __future__ import annotations
+
+import math
+
+import jax.numpy as jnp
+import numpy as np
+
+from sphjax.case import Case
+from sphjax.cases._geometry import box_walls, check_positive, check_resolution, lattice, wall_layers
+from sphjax.fluid.eos import tait_density
+from sphjax.kernels import QuinticSpline, WendlandC2, kernel_by_name
+from sphjax.state import Domain, Kind, Model, make_params, make_state
+from sphjax.timestep import stable_time_step
+
+
+def _kernel(kernel):
+    return kernel_by_name(kernel) if isinstance(kernel, str) else kernel
+
+
+def _finish(name, state, model, params, t_end, info, dt=None):
+    dt = stable_time_step(state, model, params) if dt is None else dt
+    return Case(name=name, state=state, model=model, params=params, dt=dt, t_end=t_end, info=info)
+
+
+def taylor_green(
+    n: int = 50,
+    reynolds: float = 100.0,
+    speed: float = 1.0,
+    sound_speed_factor: float = 10.0,
+    kernel="quintic_spline",
+    h_factor: float = 1.0,
+    density: str = "summation",
+    reference_pressure_factor: float = 0.0,
+    density_diffusion: str | None = None,
+    artificial_alpha: float = 0.0,
+    t_end: float = 1.0,
+) -> Case:
+    """2D periodic Taylor-Green vortex on ``[0, 1]^2`` (VALIDATION.md).
+
+    ``u = -U cos(2 pi x) sin(2 pi y)``, ``v = U sin(2 pi x) cos(2 pi y)``,
+    ``p = -(U^2 / 4)(cos 4 pi x + cos 4 pi y)``, ``nu = U / Re``, ``c0 = 10 U``.
+    Kinetic energy decays as ``exp(-16 pi^2 nu t)``.
+
+    Args:
+      n: particles per side (``dx = 1 / n``).
+      reference_pressure_factor: ``p0 = factor * rho0 c0^2`` added to the pressure.
+    """
+    n = check_resolution("n", n, 4)
+    check_positive("reynolds", reynolds)
+    check_positive("speed", speed)
+    dx = 1.0 / n
+    x = lattice([0.0, 0.0], [1.0, 1.0], dx)
+    U, nu, rho0 = speed, speed / reynolds, 1.0
+    c0 = sound_speed_factor * U
+    X, Y = x[:, 0], x[:, 1]
+    u = np.stack(
+        [-U * np.cos(2 * np.pi * X) * np.sin(2 * np.pi * Y),
+         U * np.sin(2 * np.pi * X) * np.cos(2 * np.pi * Y)], axis=-1,
+    )
+    p = -(U**2 / 4.0) * (np.cos(4 * np.pi * X) + np.cos(4 * np.pi * Y))
+    p0 = reference_pressure_factor * rho0 * c0**2
+    gamma = 7.0
+    params = make_params(
+        2, reference_density=rho0, sound_speed=c0, kinematic_viscosity=nu,
+        reference_pressure=p0, artificial_alpha=artificial_alpha,
+    )
+    rho = np.asarray(tait_density(jnp.asarray(p + p0), rho0, c0, gamma, p0))
+    kernel = _kernel(kernel)
+    model = Model(
+        dim=2, smoothing_length=h_factor * dx, kernel=kernel,
+        domain=Domain((0.0, 0.0), (1.0, 1.0), (True, True)),
+        density=density, gamma=gamma, artificial_viscosity=artificial_alpha > 0,
+        physical_viscosity=True, density_diffusion=density_diffusion,
+        particle_kinds=(Kind.FLUID,),
+    )
+    state = make_state(x, u, rho, rho0 * dx**2, Kind.FLUID)
+    info = dict(dx=dx, n=n, speed=U, viscosity=nu, reynolds=reynolds,
+                decay_rate=-8 * np.pi**2 * nu)
+    return _finish("taylor_green", state, model, params, t_end, info)
+
+
+def poiseuille(
+    n: int = 20,
+    width: float = 1.0e-3,
+    viscosity: float = 1.0e-6,
+    body_force: float = 2.0e-4,
+    sound_speed_factor: float = 20.0,
+    kernel="quintic_spline",
+    t_end: float = 1.0,
+) -> Case:
+    """Body-force-driven channel between plates at ``y = 0`` and ``y = L``, periodic in x.
+
+    Morris, Fox & Zhu (1997); steady ``u(y) = F / (2 nu) y (L - y)``, centreline
+    ``F L^2 / (8 nu)``.  No-slip dummy walls (Adami et al. 2012).
+
+    Args:
+      n: particles across the channel (``dx = L / n``).
+    """
+    n = check_resolution("n", n, 4)
+    L = check_positive("width", width)
+    nu = check_positive("viscosity", viscosity)
+    F = check_positive("body_force", body_force)
+    dx = L / n
+    kernel = _kernel(kernel)
+    h = dx
+    layers = wall_layers(kernel.support * h, dx)
+    length = max(L, 2.0 * (kernel.support * h) * 1.5)
+    length = dx * math.ceil(length / dx)
+    fluid = lattice([0.0, 0.0], [length, L], dx)
+    walls = np.concatenate([
+        lattice([0.0, -layers * dx], [length, 0.0], dx),
+        lattice([0.0, L], [length, L + layers * dx], dx),
+    ])
+    x = np.concatenate([fluid, walls])
+    kind = np.concatenate([np.full(len(fluid), Kind.FLUID), np.full(len(walls), Kind.WALL)])
+    rho0 = 1000.0
+    u_max = F * L**2 / (8 * nu)
+    c0 = sound_speed_factor * u_max
+    params = make_params(
+        2, reference_density=rho0, sound_speed=c0, kinematic_viscosity=nu, gravity=(F, 0.0)
+    )
+    margin = (layers + 2) * dx
+    model = Model(
+        dim=2, smoothing_length=h, kernel=kernel,
+        domain=Domain((0.0, -margin), (length, L + margin), (True, False)),
+        density="summation", gamma=1.0, artificial_viscosity=False, physical_viscosity=True,
+        wall_slip="no_slip", particle_kinds=(Kind.FLUID, Kind.WALL),
+    )
+    state = make_state(x, 0.0, rho0, rho0 * dx**2, kind)
+    info = dict(dx=dx, n=n, width=L, viscosity=nu, body_force=F, centreline_speed=u_max,
+                length=length)
+    return _finish("poiseuille", state, model, params, t_end, info)
+
+
+def poiseuille_startup_speed(y, t, width, viscosity, body_force, terms: int = 200):
+    """Analytic start-up velocity ``u(y, t)`` of Poiseuille flow (series, VALIDATION.md)."""
+    L, nu, F = width, viscosity, body_force
+    u = F / (2 * nu) * y * (L - y)
+    for k in range(terms):
+        m = 2 * k + 1
+        u = u - 4 * F * L**2 / (nu * np.pi**3 * m**3) * np.sin(m * np.pi * y / L) * np.exp(
+            -(m**2) * np.pi**2 * nu * t / L**2
+        )
+    return u
+
+
+def _tank(name, fluid, tank_width, tank_height, dx, kernel, h, rho0, g, c0, params_kw,
+          model_kw, t_end, info, fluid_height):
+    layers = wall_layers(kernel.support * h, dx)
+    walls = box_walls([0.0, 0.0], [tank_width, tank_height], dx, layers, open_top=True)
+    x = np.concatenate([fluid, walls])
+    kind = np.concatenate([np.full(len(fluid), Kind.FLUID), np.full(len(walls), Kind.WALL)])
+    # hydrostatic initial density so the column starts near equilibrium (eq. 12 inverted)
+    gamma = model_kw.get("gamma", 7.0)
+    depth = np.where(kind == Kind.FLUID, fluid_height - x[:, 1], 0.0)
+    rho = np.asarray(tait_density(jnp.asarray(rho0 * g * depth), rho0, c0, gamma))
+    params = make_params(2, reference_density=rho0, sound_speed=c0, gravity=(0.0, -g),
+                         **params_kw)
+    margin = (layers + 2) * dx
+    model = Model(
+        dim=2, smoothing_length=h, kernel=kernel,
+        domain=Domain((-margin, -margin), (tank_width + margin, 2.0 * tank_height + margin),
+                      (False, False)),
+        particle_kinds=(Kind.FLUID, Kind.WALL), **model_kw,
+    )
+    state = make_state(x, 0.0, rho, rho0 * dx**2, kind)
+    return _finish(name, state, model, params, t_end, info)
+
+
+def hydrostatic_tank(
+    n: int = 20,
+    height: float = 1.0,
+    width: float = 1.0,
+    gravity: float = 9.81,
+    sound_speed_factor: float = 10.0,
+    artificial_alpha: float = 0.1,
+    t_end: float = 2.0,
+) -> Case:
+    """A water column of depth ``H`` at rest in a tank: ``p = rho0 g (H - y)``.
+
+    Args:
+      n: particles over the depth (``dx = H / n``).
+    """
+    n = check_resolution("n", n, 4)
+    H = check_positive("height", height)
+    W = check_positive("width", width)
+    g = check_positive("gravity", gravity)
+    dx = H / n
+    W = dx * round(W / dx)
+    kernel, h = WendlandC2(), 1.3 * dx
+    rho0 = 1000.0
+    c0 = sound_speed_factor * math.sqrt(g * H)
+    fluid = lattice([0.0, 0.0], [W, H], dx)
+    info = dict(dx=dx, n=n, height=H, width=W, gravity=g,
+                bottom_pressure=rho0 * g * H)
+    return _tank(
+        "hydrostatic_tank", fluid, W, 1.2 * H, dx, kernel, h, rho0, g, c0,
+        dict(artificial_alpha=artificial_alpha),
+        dict(density="continuity", gamma=7.0, artificial_viscosity=True,
+             density_diffusion="molteni", wall_slip="no_slip"),
+        t_end, info, H,
+    )
+
+
+def dam_break(
+    n: int = 20,
+    column_width: float = 0.3,
+    tank_length_factor: float = 5.0,
+    gravity: float = 9.81,
+    sound_speed_factor: float = 20.0,
+    artificial_alpha: float = 0.02,
+    density_diffusion: str | None = "molteni",
+    t_end: float | None = None,
+) -> Case:
+    """Martin & Moyce (1952) dam break: a column ``L`` wide and ``2L`` high at the left
+    of a tank ``tank_length_factor * L`` long; ``c0 = 20 sqrt(g H)``.
+
+    The surge front ``Z`` (from the left wall) is reported as ``Z / L`` against
+    ``T = t sqrt(2 g / L)``; see :func:`surge_front`.
+
+    Args:
+      n: particles across the column width (``dx = L / n``).
+    """
+    n = check_resolution("n", n, 4)
+    L = check_positive("column_width", column_width)
+    g = check_positive("gravity", gravity)
+    dx = L / n
+    H = 2.0 * L
+    kernel, h = WendlandC2(), 1.3 * dx
+    rho0 = 1000.0
+    c0 = sound_speed_factor * math.sqrt(g * H)
+    tank_length = dx * round(tank_length_factor * L / dx)
+    fluid = lattice([0.0, 0.0], [L, H], dx)
+    if t_end is None:
+        t_end = 3.0 / math.sqrt(2 * g / L)
+    info = dict(dx=dx, n=n, column_width=L, column_height=H, tank_length=tank_length,
+                gravity=g, time_scale=1.0 / math.sqrt(2 * g / L))
+    return _tank(
+        "dam_break", fluid, tank_length, 1.25 * H, dx, kernel, h, rho0, g, c0,
+        dict(artificial_alpha=artificial_alpha),
+        dict(density="continuity", gamma=7.0, artificial_viscosity=True,
+             density_diffusion=density_diffusion, wall_slip="free_slip"),
+        t_end, info, H,
+    )
+
+
+def surge_front(states, case: Case):
+    """Surge front ``Z / L`` of a dam break: the rightmost fluid particle plus ``dx / 2``.
+
+    ``states`` may carry a leading time axis.
+    """
+    x = states.position[..., 0]
+    fluid = states.kind == Kind.FLUID
+    front = jnp.max(jnp.where(fluid, x, -jnp.inf), axis=-1) + 0.5 * case.info["dx"]
+    return front / case.info["column_width"]
+
+
+__all__ = ["taylor_green", "poiseuille", "hydrostatic_tank", "dam_break", "QuinticSpline"]

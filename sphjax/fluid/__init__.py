@@ -1,0 +1,1 @@
+"""Weakly compressible fluid SPH (formulation eqs. 5-12)."""

@@ -1,0 +1,51 @@
+"""Pair geometry in a box with optional periodic axes.
+
+Like ``jax_md.space``, a space is a pair of functions: ``displacement(Ra, Rb)`` returns
+the minimum-image vector ``r_a - r_b`` and ``shift(R, dR)`` moves particles and wraps
+them back into the box along periodic axes.  ``safe_norm`` returns ``|dr|`` with a
+gradient that stays finite at ``dr = 0`` (the double-where idiom).
+"""
+
+from __future__ import annotations
+
+import jax.numpy as jnp
+
+from sphjax.state import Domain
+
+
+def displacement_fn(domain: Domain):
+    """Return ``displacement(Ra, Rb) -> r_a - r_b`` with the minimum image on periodic axes."""
+    size = jnp.asarray(domain.size)
+    periodic = jnp.asarray(domain.periodic)
+
+    def displacement(Ra, Rb):
+        dr = Ra - Rb
+        if not any(domain.periodic):
+            return dr
+        size_ = size.astype(dr.dtype)
+        wrapped = dr - size_ * jnp.round(dr / size_)
+        return jnp.where(periodic, wrapped, dr)
+
+    return displacement
+
+
+def wrap_fn(domain: Domain):
+    """Return ``wrap(R)`` that maps positions into ``[lower, upper)`` on periodic axes."""
+    lower = jnp.asarray(domain.lower)
+    size = jnp.asarray(domain.size)
+    periodic = jnp.asarray(domain.periodic)
+
+    def wrap(R):
+        if not any(domain.periodic):
+            return R
+        lo, L = lower.astype(R.dtype), size.astype(R.dtype)
+        return jnp.where(periodic, lo + jnp.mod(R - lo, L), R)
+
+    return wrap
+
+
+def safe_norm(dr, axis=-1):
+    """``|dr|`` along ``axis`` whose gradient is 0 (not NaN) where ``dr = 0``."""
+    r2 = jnp.sum(dr * dr, axis=axis)
+    positive = r2 > 0
+    return jnp.where(positive, jnp.sqrt(jnp.where(positive, r2, 1.0)), 0.0)
