@@ -266,6 +266,19 @@ class _Runner:
         return out[:n]
 
 
+_RUNNERS: dict = {}
+
+
+def _runner(case: Case, dt, steps, write_every, devices) -> _Runner:
+    """A cached runner: the same set-up and run length compile once per process."""
+    x = np.asarray(case.state.position)
+    key = (case.model, x.shape, x.tobytes(), float(dt), steps, write_every, tuple(devices))
+    if key not in _RUNNERS:
+        _RUNNERS.clear()  # keep one: a runner holds a compiled simulation
+        _RUNNERS[key] = _Runner(case, dt, steps, write_every, devices)
+    return _RUNNERS[key]
+
+
 # ---------------------------------------------------------------------------- generation
 
 
@@ -405,7 +418,7 @@ def generate_dataset(
     batch_size = 4 * len(devices) if batch_size is None else int(batch_size)
     batch_size = min(batch_size, max(1, len(todo)))
     batch_size = len(devices) * math.ceil(batch_size / len(devices))
-    runner = _Runner(case, dt, steps, write_every, devices) if todo else None
+    runner = _runner(case, dt, steps, write_every, devices) if todo else None
     bar = tqdm(
         total=len(jobs),
         initial=len(jobs) - len(todo),
