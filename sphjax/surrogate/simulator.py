@@ -159,6 +159,18 @@ class LearnedSimulator:
         (_, _, over), frames = jax.lax.scan(body, carry, jnp.arange(n_steps))
         return frames, over
 
+    def compiled_rollout(self, n_steps: int):
+        """Jitted ``(model, x0, types, kinematic, neighbors) -> (frames, overflow)``,
+        compiled once per rollout length."""
+        cache = self.__dict__.setdefault("_rollouts", {})
+        if n_steps not in cache:
+
+            def run(model, x0, types, kinematic, neighbors):
+                return self.rollout(model, x0, types, n_steps, neighbors, kinematic=kinematic)
+
+            cache[n_steps] = jax.jit(run)
+        return cache[n_steps]
+
     # ------------------------------------------------------------------ training
 
     def noisy_inputs(self, positions, target, types, key):
@@ -246,10 +258,7 @@ def rollout_metrics(
     starts = [s for s in starts if s + h + n_steps < n_frames] or [0]
     neighbors = sim.allocate(data.positions[0, h])
     errors, ke_errors = [], []
-
-    @jax.jit
-    def run(model, x0, types, kin, neighbors):
-        return sim.rollout(model, x0, types, n_steps, neighbors, kinematic=kin)
+    run = sim.compiled_rollout(n_steps)
 
     for k in range(len(data)):
         types = jnp.asarray(data.particle_type[k])
