@@ -40,9 +40,9 @@ SEED = 1
 # ---- surrogate and training
 CONFIG = SimulatorConfig(
     history=5,
-    latent=16 if SMALL else 64,
-    hidden=16 if SMALL else 64,
-    message_steps=2 if SMALL else 5,
+    latent=16 if SMALL else 32,
+    hidden=16 if SMALL else 32,
+    message_steps=2 if SMALL else 3,
 )
 TRAIN_SECONDS = 20.0 if SMALL else 1800.0
 BATCH_SIZE = 2
