@@ -80,9 +80,8 @@ def plot_rollout(sim, model, test, path: Path, n_steps: int) -> None:
     types = jnp.asarray(test.particle_type[0])
     x0 = jnp.asarray(test.positions[0, : h + 1])
     truth = test.positions[0, h + 1 : h + 1 + n_steps]
-    frames, _ = jax.jit(lambda m, x: sim.rollout(m, x, types, n_steps, sim.allocate(x0[-1])))(
-        model, x0
-    )
+    neighbors = sim.allocate(x0[-1])
+    frames, _ = sim.compiled_rollout(n_steps)(model, x0, types, jnp.asarray(truth), neighbors)
     frames = np.asarray(frames)
     shows = sorted({0, n_steps // 2, n_steps - 1})
     fig, axes = plt.subplots(2, len(shows), figsize=(3.2 * len(shows), 6.4), squeeze=False)

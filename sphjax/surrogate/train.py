@@ -68,7 +68,8 @@ def train(
     """Train ``model`` on windows of ``train_data`` for ``n_steps`` or ``seconds``.
 
     With ``valid_data``, every ``eval_every`` steps the mean rollout MSE over
-    ``eval_rollout`` steps is measured and the best model kept.
+    ``eval_rollout`` steps is measured and the best model kept.  ``seconds`` is wall-clock
+    time after the first (compiling) step, validation included.
     """
     if n_steps is None and seconds is None:
         raise ValueError("give n_steps or seconds (the training budget)")
@@ -106,6 +107,8 @@ def train(
         model, opt_state = new_model, new_state
         losses.append(float(loss))
         k += 1
+        if k == 1:  # the budget starts after the first step has compiled
+            start = time.perf_counter()
         if valid_data is not None and k % eval_every == 0:
             m = rollout_metrics(sim, model, valid_data, n_steps=eval_rollout)
             valid.append((k, m["mse_mean"]))
