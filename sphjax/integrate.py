@@ -2,11 +2,14 @@
 
 Kick-drift-kick (velocity Verlet), one right-hand-side evaluation per step:
 
-    v_{n+1/2}   = v_n + dt/2 a_n                rho_{n+1/2} = rho_n + dt/2 Drho_n
-    x_{n+1}     = x_n + dt v_{n+1/2}
-    a_{n+1}, Drho_{n+1} = rhs(x_{n+1}, v_{n+1/2}, rho_{n+1/2})
-    v_{n+1}     = v_{n+1/2} + dt/2 a_{n+1}      rho_{n+1} = rho_{n+1/2} + dt/2 Drho_{n+1}
+    v_{n+1/2} = v_n + dt/2 a_n
+    x_{n+1}   = x_n + dt v_{n+1/2}
+    rho_{n+1} = rho_n + dt Drho(x_{n+1}, v_{n+1/2})          (continuity, eq. 11)
+    a_{n+1}   = a(x_{n+1}, v_{n+1/2}, rho_{n+1})
+    v_{n+1}   = v_{n+1/2} + dt/2 a_{n+1}
 
+Density lives at whole steps and velocity at half steps, the staggered leapfrog that is
+stable for the acoustic waves of weakly compressible SPH up to the usual Courant limit.
 For forces that depend on positions only (elastic solids, inviscid fluids with summation
 density) this is the symplectic Störmer-Verlet scheme.  The rates of the last evaluation
 are kept in the State, so they are not recomputed.
@@ -116,8 +119,9 @@ def kick_drift_kick(state: State, neighbors: Neighbors, dt, model: Model, params
     free = ((kind == Kind.FLUID) | (kind == Kind.SOLID))[:, None]
     half = 0.5 * dt
     velocity = jnp.where(free, state.velocity + half * state.acceleration, state.velocity)
-    density = state.density + half * state.density_rate
-    position = state.position + dt * velocity  # walls move with their prescribed velocity
+    # walls move with their prescribed velocity; with the transport-velocity formulation
+    # fluid particles are advected with v~ = v_{n+1/2} + dt/2 a_b (Adami et al. 2013)
+    position = state.position + dt * (velocity + half * state.shift_acceleration)
     time = state.time + dt
     if model.clamped_motion is not None:
         clamped = (kind == Kind.CLAMPED)[:, None]
@@ -128,11 +132,10 @@ def kick_drift_kick(state: State, neighbors: Neighbors, dt, model: Model, params
         position = jnp.where((kind == Kind.CLAMPED)[:, None], state.position, position)
     position = wrap_fn(model.domain)(position)
     neighbors = _update_neighbors(position, neighbors, model)
-    state = state.replace(position=position, velocity=velocity, density=density, time=time)
-    state = evaluate(state, neighbors, model, params)
+    state = state.replace(position=position, velocity=velocity, time=time)
+    state = evaluate(state, neighbors, model, params, density_step=dt)
     velocity = jnp.where(free, state.velocity + half * state.acceleration, state.velocity)
-    density = state.density + half * state.density_rate
-    return state.replace(velocity=velocity, density=density), neighbors
+    return state.replace(velocity=velocity), neighbors
 
 
 def unhealthy(state: State, model: Model):
