@@ -281,6 +281,7 @@ def simulate(
     n_frames = n_steps // save_every
     traced = _is_traced(params, state, dt)
     if not _is_traced(params, state) and not _is_traced(dt):
+        _check_finite(state)
         check_time_step(float(dt), state, model, params)
         _check_inside(state, model)
     dt = jnp.asarray(dt, state.position.dtype)
@@ -304,8 +305,14 @@ def simulate(
         return Trajectory(states=states, times=times)
 
     state = jax.jit(evaluate, static_argnames="model")(state, neighbors, model, params)
-    if bool(jnp.any(~jnp.isfinite(state.acceleration))):
-        raise SimulationError("the initial state has non-finite accelerations", step=0)
+    bad = ~np.all(np.isfinite(np.asarray(state.acceleration)), axis=-1)
+    if bad.any():
+        particle = int(np.argmax(bad))
+        raise SimulationError(
+            f"the initial state has a non-finite acceleration at particle {particle} "
+            "(step 0); check the initial density, mass and spacing of the case",
+            step=0, particle=particle, time=0.0,
+        )
     all_frames = [_expand(state)]
     if on_frames is not None:
         on_frames(all_frames[0], jnp.zeros(1))
@@ -348,6 +355,19 @@ def simulate(
             progress(k * save_every)
     times = jnp.arange(n_frames + 1) * (save_every * dt)
     return Trajectory(states=_stack(all_frames), times=times)
+
+
+def _check_finite(state: State) -> None:
+    """Reject an initial state with NaN/inf in its positions, velocities, densities or masses."""
+    for name in ("position", "velocity", "density", "mass"):
+        x = np.asarray(getattr(state, name))
+        bad = ~np.isfinite(x.reshape(x.shape[0], -1)).all(axis=-1)
+        if bad.any():
+            i = int(np.argmax(bad))
+            raise ValueError(
+                f"state.{name}: particle {i} has a non-finite value {x[i].tolist()}; "
+                f"every initial {name} must be a finite number"
+            )
 
 
 def _check_inside(state: State, model: Model) -> None:
