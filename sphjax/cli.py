@@ -226,7 +226,7 @@ def _run(args, out: Path) -> int:
         f"saving every {save_every} steps ({n_frames + 1} frames) to {out}",
         file=sys.stderr,
     )
-    attrs = {"command": sys.argv, "n_steps": n_steps, "save_every": save_every}
+    attrs = {"command": ["sphjax", *args.argv], "n_steps": n_steps, "save_every": save_every}
     bar = tqdm(total=n_steps, unit="step", disable=args.quiet, file=sys.stderr)
     start = time.perf_counter()
     first_chunk_end = []
@@ -360,6 +360,7 @@ def main(argv: list[str] | None = None) -> int:
         args = parser.parse_args(argv)
     except SystemExit as exit_:  # argparse has printed its message (or --help)
         return exit_.code if isinstance(exit_.code, int) else EXIT_USAGE
+    args.argv = list(sys.argv[1:] if argv is None else argv)
     try:
         return COMMANDS[args.command](args)
     except UsageError as err:

@@ -289,11 +289,14 @@ def _open(path):
     return f
 
 
+_PLAIN_ATTRS = {"format", "sphjax_version", "case", "error"}
+
+
 def _metadata(f) -> dict[str, Any]:
     meta = {key: _decode(value) for key, value in f.attrs.items()}
-    for key in ("model", "case_info"):
-        if key in meta:
-            meta[key] = json.loads(meta[key])
+    for key, value in meta.items():  # model, case_info and extra attrs are stored as JSON
+        if isinstance(value, str) and key not in _PLAIN_ATTRS:
+            meta[key] = json.loads(value)
     meta["complete"] = bool(meta.get("complete", False))
     meta["n_frames"] = int(f["times"].shape[0]) if "times" in f else 0
     if "params" in f:

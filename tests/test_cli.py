@@ -48,6 +48,8 @@ def test_run_writes_frames_and_prints_a_summary(tiny_run, capsys):
     assert len(trajectory) == 3  # initial + 4 steps / 2
     assert meta["complete"] and meta["case"] == "taylor_green"
     assert meta["case_info"]["n"] == 8
+    assert meta["command"][:3] == ["sphjax", "run", "taylor_green"]
+    assert meta["save_every"] == 2 and meta["n_steps"] == 4
 
 
 def test_summary(tmp_path, capsys):
