@@ -8,7 +8,7 @@ Weakly compressible fluids and total-Lagrangian elastic solids as pure functions
     traj = sphjax.simulate(case, n_steps=1000, save_every=100)
 """
 
-from sphjax import cases, kernels
+from sphjax import cases, io, kernels
 from sphjax.case import Case
 from sphjax.integrate import (
     NeighborOverflowError,
@@ -17,6 +17,7 @@ from sphjax.integrate import (
     kick_drift_kick,
     simulate,
 )
+from sphjax.io import TrajectoryWriter, read_trajectory
 from sphjax.rhs import Neighbors, evaluate
 from sphjax.state import Domain, Kind, Model, Params, State, make_params, make_state
 from sphjax.timestep import stable_time_step
@@ -34,12 +35,15 @@ __all__ = [
     "SimulationError",
     "State",
     "Trajectory",
+    "TrajectoryWriter",
     "cases",
     "evaluate",
+    "io",
     "kernels",
     "kick_drift_kick",
     "make_params",
     "make_state",
+    "read_trajectory",
     "simulate",
     "stable_time_step",
     "__version__",

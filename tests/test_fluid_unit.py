@@ -36,14 +36,22 @@ def _perturbed_periodic_case(n=10, seed=0, **model_changes):
 
 def test_two_particle_forces_are_equal_and_opposite():
     model = sphjax.Model(
-        dim=2, smoothing_length=0.1, domain=sphjax.Domain((0.0, 0.0), (1.0, 1.0), (True, True)),
-        density="continuity", artificial_viscosity=True, physical_viscosity=True,
+        dim=2,
+        smoothing_length=0.1,
+        domain=sphjax.Domain((0.0, 0.0), (1.0, 1.0), (True, True)),
+        density="continuity",
+        artificial_viscosity=True,
+        physical_viscosity=True,
         particle_kinds=(Kind.FLUID,),
     )
-    params = sphjax.make_params(2, reference_density=1.0, sound_speed=10.0,
-                                artificial_alpha=0.5, kinematic_viscosity=0.01)
+    params = sphjax.make_params(
+        2, reference_density=1.0, sound_speed=10.0, artificial_alpha=0.5, kinematic_viscosity=0.01
+    )
     state = sphjax.make_state(
-        [[0.50, 0.50], [0.58, 0.53]], [[0.3, -0.1], [-0.2, 0.4]], [1.01, 0.99], [0.011, 0.009],
+        [[0.50, 0.50], [0.58, 0.53]],
+        [[0.3, -0.1], [-0.2, 0.4]],
+        [1.01, 0.99],
+        [0.011, 0.009],
         Kind.FLUID,
     )
     neighbors = build_neighbors(state, model)
@@ -89,6 +97,8 @@ def test_hydrostatic_wall_pressure_extrapolation():
     p = np.asarray(rates.pressure)
     g, H = case.info["gravity"], case.info["height"]
     # first wall layer below the bottom, away from the corners
-    first_layer = (kind == Kind.WALL) & np.isclose(y, -0.5 * case.info["dx"]) & (x > 0.3) & (x < 0.7)
+    first_layer = (
+        (kind == Kind.WALL) & np.isclose(y, -0.5 * case.info["dx"]) & (x > 0.3) & (x < 0.7)
+    )
     expected = 1000.0 * g * (H - y[first_layer])
     np.testing.assert_allclose(p[first_layer], expected, rtol=0.02)

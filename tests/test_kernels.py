@@ -15,8 +15,12 @@ import pytest
 from sphjax import kernels
 from sphjax.space import safe_norm
 
-KERNELS = [kernels.CubicSpline(), kernels.QuinticSpline(), kernels.WendlandC2(),
-           kernels.WendlandC4()]
+KERNELS = [
+    kernels.CubicSpline(),
+    kernels.QuinticSpline(),
+    kernels.WendlandC2(),
+    kernels.WendlandC4(),
+]
 
 
 @pytest.mark.parametrize("kernel", KERNELS, ids=lambda k: type(k).__name__)
