@@ -123,8 +123,18 @@ def peer_available(name: str, python: str) -> tuple[bool, str]:
 
 def run_peer(name: str, python: str, n: int, steps: int, repeats: int, threads: int) -> dict:
     cmd = [
-        python, str(PEERS[name]["script"]), "--n", str(n), "--steps", str(steps),
-        "--repeats", str(repeats), "--dt", repr(time_step(n)), "--threads", str(threads),
+        python,
+        str(PEERS[name]["script"]),
+        "--n",
+        str(n),
+        "--steps",
+        str(steps),
+        "--repeats",
+        str(repeats),
+        "--dt",
+        repr(time_step(n)),
+        "--threads",
+        str(threads),
     ]
     env = dict(os.environ)
     env["OMP_NUM_THREADS"] = str(threads)
@@ -162,19 +172,29 @@ def summarise(results: list[dict]) -> dict:
 
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--sizes", type=int, nargs="+", default=[100, 200],
-                        help="particles per side n (n x n particles); default 100 200")
+    parser.add_argument(
+        "--sizes",
+        type=int,
+        nargs="+",
+        default=[100, 200],
+        help="particles per side n (n x n particles); default 100 200",
+    )
     parser.add_argument("--steps", type=int, default=300, help="time steps per timed run")
     parser.add_argument("--repeats", type=int, default=2, help="timed runs per round")
-    parser.add_argument("--rounds", type=int, default=2,
-                        help="times the whole code sequence is repeated per size")
-    parser.add_argument("--peers", default="jax-sph,pysph",
-                        help="comma-separated peers to run (jax-sph, pysph) or 'none'")
+    parser.add_argument(
+        "--rounds", type=int, default=2, help="times the whole code sequence is repeated per size"
+    )
+    parser.add_argument(
+        "--peers",
+        default="jax-sph,pysph",
+        help="comma-separated peers to run (jax-sph, pysph) or 'none'",
+    )
     parser.add_argument("--jaxsph-python", help="python of the JAX-SPH venv")
     parser.add_argument("--pysph-python", help="python of the PySPH venv")
     parser.add_argument("--pysph-threads", type=int, default=2, help="OpenMP threads")
-    parser.add_argument("--skin", type=float, default=None,
-                        help="sphjax Model.neighbor_skin (default: the case's)")
+    parser.add_argument(
+        "--skin", type=float, default=None, help="sphjax Model.neighbor_skin (default: the case's)"
+    )
     parser.add_argument("--json", type=Path, help="also write all raw results here")
     args = parser.parse_args(argv)
 
@@ -195,8 +215,11 @@ def main(argv=None):
         else:
             print(f"skipping {name}: {why} (see docs/performance.md)", flush=True)
 
-    print(f"{os.cpu_count()} CPUs; {args.steps} steps per run, {args.repeats} runs per "
-          f"round, {args.rounds} rounds; compile/warm-up excluded", flush=True)
+    print(
+        f"{os.cpu_count()} CPUs; {args.steps} steps per run, {args.repeats} runs per "
+        f"round, {args.rounds} rounds; compile/warm-up excluded",
+        flush=True,
+    )
     raw = []
     table = []
     for n in args.sizes:
@@ -208,21 +231,27 @@ def main(argv=None):
                     if python is None:
                         result = run_sphjax(n, args.steps, args.repeats, args.skin)
                     else:
-                        result = run_peer(name, python, n, args.steps, args.repeats,
-                                          args.pysph_threads)
+                        result = run_peer(
+                            name, python, n, args.steps, args.repeats, args.pysph_threads
+                        )
                 except Exception as err:  # a failing peer must not lose the others
                     print(f"{name} n={n}: {err}", flush=True)
                     continue
                 raw.append(dict(result, n=n))
                 per_code.setdefault(name, []).append(result)
                 speeds = ", ".join(f"{rate(result, s) / 1e6:.3f}" for s in result["seconds"])
-                print(f"  {name:8s} {result['n_particles']:6d} particles: {speeds} "
-                      f"M particle-steps/s (warm-up {result['warmup_s']:.1f} s)", flush=True)
+                print(
+                    f"  {name:8s} {result['n_particles']:6d} particles: {speeds} "
+                    f"M particle-steps/s (warm-up {result['warmup_s']:.1f} s)",
+                    flush=True,
+                )
         table.append({name: summarise(rs) for name, rs in per_code.items()})
 
     print()
-    print(f"{'code':8s} {'particles':>9s} {'median':>9s} {'best':>9s}  {'vs JAX-SPH':>10s} "
-          f"{'vs PySPH':>9s}   [M particle-steps/s; sphjax ratios use medians]")
+    print(
+        f"{'code':8s} {'particles':>9s} {'median':>9s} {'best':>9s}  {'vs JAX-SPH':>10s} "
+        f"{'vs PySPH':>9s}   [M particle-steps/s; sphjax ratios use medians]"
+    )
     for row in table:
         for name, s in row.items():
             ratios = ["", ""]
@@ -230,8 +259,10 @@ def main(argv=None):
                 for k, peer in enumerate(("jax-sph", "pysph")):
                     if peer in row:
                         ratios[k] = f"{s['median'] / row[peer]['median']:.2f}x"
-            print(f"{name:8s} {s['n_particles']:9d} {s['median'] / 1e6:9.3f} "
-                  f"{s['best'] / 1e6:9.3f}  {ratios[0]:>10s} {ratios[1]:>9s}   {s['note']}")
+            print(
+                f"{name:8s} {s['n_particles']:9d} {s['median'] / 1e6:9.3f} "
+                f"{s['best'] / 1e6:9.3f}  {ratios[0]:>10s} {ratios[1]:>9s}   {s['note']}"
+            )
     if args.json:
         args.json.write_text(json.dumps(raw, indent=1))
 

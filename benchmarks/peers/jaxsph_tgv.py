@@ -47,10 +47,12 @@ class TaylorGreen(SimulationSetup):
 
     def _init_velocity2D(self, r):
         x, y = r
-        return jnp.array([
-            -jnp.cos(2.0 * jnp.pi * x) * jnp.sin(2.0 * jnp.pi * y),
-            jnp.sin(2.0 * jnp.pi * x) * jnp.cos(2.0 * jnp.pi * y),
-        ])
+        return jnp.array(
+            [
+                -jnp.cos(2.0 * jnp.pi * x) * jnp.sin(2.0 * jnp.pi * y),
+                jnp.sin(2.0 * jnp.pi * x) * jnp.cos(2.0 * jnp.pi * y),
+            ]
+        )
 
     def _init_velocity3D(self, r):
         raise NotImplementedError
@@ -90,19 +92,38 @@ def main():
     import io
 
     with contextlib.redirect_stdout(io.StringIO()):
-        (cfg, box_size, state, g_ext_fn, bc_fn, nw_fn, eos_fn, _key, displacement_fn,
-         shift_fn) = TaylorGreen(cfg).initialize()
+        (cfg, box_size, state, g_ext_fn, bc_fn, nw_fn, eos_fn, _key, displacement_fn, shift_fn) = (
+            TaylorGreen(cfg).initialize()
+        )
     solver = WCSPH(
-        displacement_fn, eos_fn, g_ext_fn, cfg.case.dx, cfg.case.dim, cfg.solver.dt,
-        cfg.case.c_ref, cfg.solver.eta_limiter, cfg.solver.name, cfg.kernel.name,
-        cfg.solver.is_bc_trick, cfg.solver.density_evolution, cfg.solver.artificial_alpha,
-        cfg.solver.free_slip, cfg.solver.density_renormalize, cfg.solver.heat_conduction,
+        displacement_fn,
+        eos_fn,
+        g_ext_fn,
+        cfg.case.dx,
+        cfg.case.dim,
+        cfg.solver.dt,
+        cfg.case.c_ref,
+        cfg.solver.eta_limiter,
+        cfg.solver.name,
+        cfg.kernel.name,
+        cfg.solver.is_bc_trick,
+        cfg.solver.density_evolution,
+        cfg.solver.artificial_alpha,
+        cfg.solver.free_slip,
+        cfg.solver.density_renormalize,
+        cfg.solver.heat_conduction,
     )
     forward = solver.forward_wrapper()
     neighbor_fn = partition.neighbor_list(
-        displacement_fn, box_size, r_cutoff=solver._kernel_fn.cutoff, backend=cfg.nl.backend,
-        capacity_multiplier=1.25, mask_self=False, format=Sparse,
-        num_particles_max=state["r"].shape[0], num_partitions=cfg.nl.num_partitions,
+        displacement_fn,
+        box_size,
+        r_cutoff=solver._kernel_fn.cutoff,
+        backend=cfg.nl.backend,
+        capacity_multiplier=1.25,
+        mask_self=False,
+        format=Sparse,
+        num_particles_max=state["r"].shape[0],
+        num_partitions=cfg.nl.num_partitions,
         pbc=np.array(cfg.case.pbc),
     )
     num_particles = (state["tag"] != Tag.PAD_VALUE).sum()
@@ -132,13 +153,22 @@ def main():
         state, neighbors = run(state, neighbors, args.steps)
         seconds.append(time.perf_counter() - t0)
     finite = bool(jnp.all(jnp.isfinite(state["u"])))
-    print(json.dumps(dict(
-        code="jax-sph", n_particles=int(state["r"].shape[0]), steps=args.steps,
-        seconds=seconds, warmup_s=warmup, rhs_per_step=1, finite=finite,
-        dtype=str(state["r"].dtype),
-        note=f"jax-sph 0.1.0 (jax {jax.__version__}), {state['r'].dtype}, Sparse list, "
-        "no skin, si_euler",
-    )))
+    print(
+        json.dumps(
+            dict(
+                code="jax-sph",
+                n_particles=int(state["r"].shape[0]),
+                steps=args.steps,
+                seconds=seconds,
+                warmup_s=warmup,
+                rhs_per_step=1,
+                finite=finite,
+                dtype=str(state["r"].dtype),
+                note=f"jax-sph 0.1.0 (jax {jax.__version__}), {state['r'].dtype}, Sparse list, "
+                "no skin, si_euler",
+            )
+        )
+    )
 
 
 if __name__ == "__main__":
