@@ -41,6 +41,9 @@ import time
 from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
+# XLA_FLAGS as the user gave them: importing sphjax adds its own defaults (sphjax/_xla.py),
+# which an older jaxlib in a peer's venv would reject.
+USER_XLA_FLAGS = os.environ.get("XLA_FLAGS")
 PEERS = {
     "jax-sph": dict(
         script=HERE / "peers" / "jaxsph_tgv.py",
@@ -96,8 +99,8 @@ def run_sphjax(n: int, steps: int, repeats: int, skin: float | None = None) -> d
         seconds=seconds,
         warmup_s=compile_s,
         rhs_per_step=1,
-        note=f"jax {jax.__version__}, float32, dense neighbour list, "
-        f"skin {case.model.neighbor_skin} x support",
+        note=f"jax {jax.__version__}, {case.state.position.dtype}, dense neighbour list, "
+        f"skin {case.model.neighbor_skin} x support, XLA_FLAGS={os.environ.get('XLA_FLAGS', '')!r}",
     )
 
 
@@ -139,6 +142,9 @@ def run_peer(name: str, python: str, n: int, steps: int, repeats: int, threads: 
     env = dict(os.environ)
     env["OMP_NUM_THREADS"] = str(threads)
     env.pop("PYTHONPATH", None)
+    env.pop("XLA_FLAGS", None)
+    if USER_XLA_FLAGS is not None:
+        env["XLA_FLAGS"] = USER_XLA_FLAGS
     proc = subprocess.run(cmd, capture_output=True, text=True, env=env)
     lines = [ln for ln in proc.stdout.splitlines() if ln.startswith("{")]
     if proc.returncode or not lines:
@@ -179,10 +185,10 @@ def main(argv=None):
         default=[100, 200],
         help="particles per side n (n x n particles); default 100 200",
     )
-    parser.add_argument("--steps", type=int, default=300, help="time steps per timed run")
+    parser.add_argument("--steps", type=int, default=200, help="time steps per timed run")
     parser.add_argument("--repeats", type=int, default=2, help="timed runs per round")
     parser.add_argument(
-        "--rounds", type=int, default=2, help="times the whole code sequence is repeated per size"
+        "--rounds", type=int, default=1, help="times the whole code sequence is repeated per size"
     )
     parser.add_argument(
         "--peers",
