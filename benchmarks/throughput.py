@@ -87,16 +87,18 @@ def run_sphjax(n: int, steps: int, repeats: int, skin: float | None = None) -> d
     t0 = time.perf_counter()
     run()  # compile + warm-up
     compile_s = time.perf_counter() - t0
-    seconds = []
+    seconds, cpu_seconds = [], []
     for _ in range(repeats):
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), time.process_time()
         run()
         seconds.append(time.perf_counter() - t0)
+        cpu_seconds.append(time.process_time() - c0)
     return dict(
         code="sphjax",
         n_particles=case.n_particles,
         steps=steps,
         seconds=seconds,
+        cpu_seconds=cpu_seconds,
         warmup_s=compile_s,
         rhs_per_step=1,
         note=f"jax {jax.__version__}, {case.state.position.dtype}, dense neighbour list, "
@@ -162,6 +164,7 @@ def rate(result: dict, seconds: float) -> float:
 
 def summarise(results: list[dict]) -> dict:
     seconds = [s for r in results for s in r["seconds"]]
+    cpu = [s for r in results for s in r.get("cpu_seconds", [])]
     first = results[0]
     return dict(
         code=first["code"],
@@ -169,6 +172,7 @@ def summarise(results: list[dict]) -> dict:
         steps=first["steps"],
         median=rate(first, statistics.median(seconds)),
         best=rate(first, min(seconds)),
+        cpu=rate(first, statistics.median(cpu)) if cpu else float("nan"),
         runs=len(seconds),
         warmup_s=statistics.median(r["warmup_s"] for r in results),
         rhs_per_step=first["rhs_per_step"],
@@ -246,28 +250,32 @@ def main(argv=None):
                 raw.append(dict(result, n=n))
                 per_code.setdefault(name, []).append(result)
                 speeds = ", ".join(f"{rate(result, s) / 1e6:.3f}" for s in result["seconds"])
+                cpu = ", ".join(f"{rate(result, s) / 1e6:.3f}" for s in result["cpu_seconds"])
                 print(
                     f"  {name:8s} {result['n_particles']:6d} particles: {speeds} "
-                    f"M particle-steps/s (warm-up {result['warmup_s']:.1f} s)",
+                    f"M particle-steps/s; per CPU-s {cpu} (warm-up {result['warmup_s']:.1f} s)",
                     flush=True,
                 )
         table.append({name: summarise(rs) for name, rs in per_code.items()})
 
     print()
-    print(
-        f"{'code':8s} {'particles':>9s} {'median':>9s} {'best':>9s}  {'vs JAX-SPH':>10s} "
-        f"{'vs PySPH':>9s}   [M particle-steps/s; sphjax ratios use medians]"
-    )
+    print("M particle-steps/s: wall clock (median, best of all timed runs) and per CPU-second")
+    print("(process CPU time, all threads); ratios are sphjax / peer of the wall-clock medians,")
+    print("in brackets of the CPU-time rates.")
+    header = f"{'code':8s} {'particles':>9s} {'median':>8s} {'best':>8s} {'per-CPU-s':>9s}"
+    print(f"{header}  {'vs JAX-SPH':>15s} {'vs PySPH':>15s}")
     for row in table:
         for name, s in row.items():
             ratios = ["", ""]
             if name == "sphjax":
                 for k, peer in enumerate(("jax-sph", "pysph")):
                     if peer in row:
-                        ratios[k] = f"{s['median'] / row[peer]['median']:.2f}x"
+                        wall = s["median"] / row[peer]["median"]
+                        cpu = s["cpu"] / row[peer]["cpu"]
+                        ratios[k] = f"{wall:.2f}x ({cpu:.2f}x)"
             print(
-                f"{name:8s} {s['n_particles']:9d} {s['median'] / 1e6:9.3f} "
-                f"{s['best'] / 1e6:9.3f}  {ratios[0]:>10s} {ratios[1]:>9s}   {s['note']}"
+                f"{name:8s} {s['n_particles']:9d} {s['median'] / 1e6:8.3f} {s['best'] / 1e6:8.3f}"
+                f" {s['cpu'] / 1e6:9.3f}  {ratios[0]:>15s} {ratios[1]:>15s}   {s['note']}"
             )
     if args.json:
         args.json.write_text(json.dumps(raw, indent=1))
