@@ -8,6 +8,11 @@ Weakly compressible fluids and total-Lagrangian elastic solids as pure functions
     traj = sphjax.simulate(case, n_steps=1000, save_every=100)
 """
 
+# ruff: noqa: E402  (XLA flags must be set before the other imports)
+from sphjax._xla import apply_default_flags
+
+apply_default_flags()  # before any JAX backend exists; see sphjax/_xla.py
+
 from sphjax import cases, io, kernels
 from sphjax.case import Case
 from sphjax.integrate import (
