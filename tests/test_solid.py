@@ -18,7 +18,7 @@ import sphjax
 from sphjax.case import Case
 from sphjax.kernels import CubicSpline, WendlandC2
 from sphjax.neighbors import reference_neighbors
-from sphjax.rhs import Neighbors, evaluate
+from sphjax.rhs import evaluate
 from sphjax.solid import (
     green_lagrange_strain,
     lame_constants,
@@ -55,16 +55,18 @@ def _lattice(n, dim=2):
 def _setup(n=9, dim=2, kernel=CubicSpline(), h=H, penalty=False, **params):
     X = _lattice(n, dim)
     model = Model(
-        dim=dim, smoothing_length=h, kernel=kernel,
+        dim=dim,
+        smoothing_length=h,
+        kernel=kernel,
         domain=Domain((-10.0,) * dim, (10.0,) * dim, (False,) * dim),
-        solid_penalty=penalty, particle_kinds=(Kind.SOLID,),
+        solid_penalty=penalty,
+        particle_kinds=(Kind.SOLID,),
     )
     # lambda = mu = 1  <=>  E = 2.5, nu = 0.25 (eq. 19)
     kw = dict(young_modulus=2.5, poisson_ratio=0.25, solid_density=1.0)
     kw.update(params)
     p = make_params(dim, **kw)
-    state = make_state(X, 0.0, kw["solid_density"], kw["solid_density"] * SPACING**dim,
-                       Kind.SOLID)
+    state = make_state(X, 0.0, kw["solid_density"], kw["solid_density"] * SPACING**dim, Kind.SOLID)
     members = jnp.arange(len(X))
     idx = jnp.asarray(reference_neighbors(X, np.arange(len(X)), model))
     return X, state, members, idx, model, p
@@ -103,8 +105,12 @@ def test_correction_matrix_is_identity_like_and_F_is_identity_undeformed():
 
 @pytest.mark.parametrize(
     "A",
-    [np.diag([2.0, 1.0]), np.diag([2.0, 3.0]), _rotation(ROTATION),
-     np.array([[1.3, 0.4], [-0.2, 0.8]])],
+    [
+        np.diag([2.0, 1.0]),
+        np.diag([2.0, 3.0]),
+        _rotation(ROTATION),
+        np.array([[1.3, 0.4], [-0.2, 0.8]]),
+    ],
     ids=["stretch21", "stretch23", "rotation", "general"],
 )
 def test_patch_deformation_gradient(A):
@@ -187,7 +193,9 @@ def test_clamped_particles_take_part_but_do_not_move():
     X = _lattice(6)
     kind = np.where(X[:, 0] < 0.15, Kind.CLAMPED, Kind.SOLID)
     model = Model(
-        dim=2, smoothing_length=H, kernel=CubicSpline(),
+        dim=2,
+        smoothing_length=H,
+        kernel=CubicSpline(),
         domain=Domain((-10.0, -10.0), (10.0, 10.0), (False, False)),
         particle_kinds=(Kind.SOLID, Kind.CLAMPED),
     )
@@ -201,24 +209,34 @@ def test_clamped_particles_take_part_but_do_not_move():
     assert np.abs(np.asarray(out.acceleration)[~clamped]).max() > 0
     # clamped F is computed from the same sums: a uniform stretch gives F = diag(1.1, 1)
     fields = solid_fields(moved, nb.solid_members, nb.solid_idx, model, params)
-    np.testing.assert_allclose(fields.F, np.broadcast_to(np.diag([1.1, 1.0]), fields.F.shape),
-                               atol=1e-12)
+    np.testing.assert_allclose(
+        fields.F, np.broadcast_to(np.diag([1.1, 1.0]), fields.F.shape), atol=1e-12
+    )
     case = Case("clamped", moved, model, params, dt=1e-3, t_end=1.0)
     traj = sphjax.simulate(case, n_steps=20, save_every=20)
-    np.testing.assert_array_equal(np.asarray(traj.final.position)[clamped],
-                                  np.asarray(moved.position)[clamped])
+    np.testing.assert_array_equal(
+        np.asarray(traj.final.position)[clamped], np.asarray(moved.position)[clamped]
+    )
 
 
 def _free_body(penalty):
     rng = np.random.default_rng(0)
     X = _lattice(8)[:48] * 0.5  # 6 x 8 block, spacing 0.05
     model = Model(
-        dim=2, smoothing_length=0.06, kernel=WendlandC2(),
+        dim=2,
+        smoothing_length=0.06,
+        kernel=WendlandC2(),
         domain=Domain((-10.0, -10.0), (10.0, 10.0), (False, False)),
-        solid_penalty=penalty, particle_kinds=(Kind.SOLID,),
+        solid_penalty=penalty,
+        particle_kinds=(Kind.SOLID,),
     )
-    params = make_params(2, young_modulus=1.0e3, poisson_ratio=0.3, solid_density=1.0,
-                         penalty_alpha=0.1 if penalty else 0.0)
+    params = make_params(
+        2,
+        young_modulus=1.0e3,
+        poisson_ratio=0.3,
+        solid_density=1.0,
+        penalty_alpha=0.1 if penalty else 0.0,
+    )
     centre = X.mean(0)
     spin = 2.0 * np.stack([-(X[:, 1] - centre[1]), X[:, 0] - centre[0]], -1)
     velocity = spin + np.array([0.3, -0.1]) + 0.05 * rng.standard_normal(X.shape)
@@ -265,8 +283,9 @@ def test_gradient_of_plate_tip_wrt_young_modulus_is_finite():
     assert float(value) > 0  # the tip moved upwards
 
     def loss_density(rho):
-        traj = sphjax.simulate(case, case.params.replace(solid_density=rho), n_steps=50,
-                               save_every=50)
+        traj = sphjax.simulate(
+            case, case.params.replace(solid_density=rho), n_steps=50, save_every=50
+        )
         return tip(traj, case)[-1, 1]
 
     assert np.isfinite(float(jax.grad(loss_density)(case.params.solid_density)))
