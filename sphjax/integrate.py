@@ -157,7 +157,7 @@ def _step_with_checks(carry, dt, model, params):
 
 def _run_steps(carry, n_steps: int, checkpoint_every: int | None, step_fn):
     """``n_steps`` steps; with ``checkpoint_every`` rematerialise steps and chunks."""
-    body = lambda c, _: (step_fn(c), None)
+    body = (lambda c, _: (step_fn(c), None))
     if checkpoint_every is None or n_steps <= 1:
         return jax.lax.scan(body, carry, None, length=n_steps)[0]
     body = jax.checkpoint(body)
@@ -174,9 +174,8 @@ def _run_steps(carry, n_steps: int, checkpoint_every: int | None, step_fn):
     return carry
 
 
-def _run_frames(
-    state, neighbors, failure, step, dt, params, *, model, save_every, n_frames, checkpoint_every
-):
+def _run_frames(state, neighbors, failure, step, dt, params, *, model, save_every, n_frames,
+                checkpoint_every):
     step_fn = functools.partial(_step_with_checks, dt=dt, model=model, params=params)
 
     def frame(carry, _):
@@ -215,9 +214,7 @@ def _raise_failure(failure, dt):
         raise SimulationError(
             f"simulation went unstable at step {step} (t = {step * float(dt):.6g}): particle "
             f"{particle} has a non-finite position/velocity or left the domain",
-            step=step,
-            particle=particle,
-            time=step * float(dt),
+            step=step, particle=particle, time=step * float(dt),
         )
 
 
@@ -276,7 +273,9 @@ def simulate(
     n_steps = int(n_steps)
     save_every = n_steps if save_every is None else int(save_every)
     if save_every < 1 or n_steps % save_every:
-        raise ValueError(f"save_every={save_every} must be a positive divisor of n_steps={n_steps}")
+        raise ValueError(
+            f"save_every={save_every} must be a positive divisor of n_steps={n_steps}"
+        )
     if checkpoint_every is not None and int(checkpoint_every) < 1:
         raise ValueError(f"checkpoint_every must be a positive integer, got {checkpoint_every}")
     n_frames = n_steps // save_every
@@ -295,16 +294,8 @@ def simulate(
         neighbors = _update_neighbors(state.position, neighbors, model, rebuild=True)
         state = evaluate(state, neighbors, model, params)
         carry, frames = _run_frames(
-            state,
-            neighbors,
-            failure,
-            step,
-            dt,
-            params,
-            model=model,
-            save_every=save_every,
-            n_frames=n_frames,
-            checkpoint_every=checkpoint_every,
+            state, neighbors, failure, step, dt, params, model=model, save_every=save_every,
+            n_frames=n_frames, checkpoint_every=checkpoint_every,
         )
         jax.debug.callback(_raise_overflow, _overflowed(carry[1]))
         jax.debug.callback(_raise_failure, carry[2], dt)
@@ -324,16 +315,8 @@ def simulate(
         k = min(frames_per_chunk, n_frames - done)
         for _attempt in range(10):
             carry, frames = _run_chunk(
-                state,
-                neighbors,
-                failure,
-                step,
-                dt,
-                params,
-                model=model,
-                save_every=save_every,
-                n_frames=k,
-                checkpoint_every=None,
+                state, neighbors, failure, step, dt, params, model=model,
+                save_every=save_every, n_frames=k, checkpoint_every=None,
             )
             if not bool(_overflowed(carry[1])):
                 break

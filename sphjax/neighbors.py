@@ -24,7 +24,7 @@ from jax_md import partition
 from jax_md import space as jmd_space
 
 from sphjax import kernels
-from sphjax.space import safe_norm
+from sphjax.space import displacement_fn, safe_norm
 from sphjax.state import Model
 
 
@@ -173,9 +173,9 @@ def reference_neighbors(reference_position, members, model: Model) -> np.ndarray
     buckets: dict[tuple, list[int]] = {}
     for k, c in enumerate(map(tuple, cell)):
         buckets.setdefault(c, []).append(k)
-    offsets = (
-        np.array(np.meshgrid(*[[-1, 0, 1]] * X.shape[1], indexing="ij")).reshape(X.shape[1], -1).T
-    )
+    offsets = np.array(np.meshgrid(*[[-1, 0, 1]] * X.shape[1], indexing="ij")).reshape(
+        X.shape[1], -1
+    ).T
     lists = []
     for k, c in enumerate(cell):
         cand = []

@@ -121,14 +121,8 @@ def fluid_rates(state: State, idx, model: Model, params: Params):
     pi_ab = 0.0
     if model.artificial_viscosity:
         pi_ab = monaghan_pi(
-            v_ab,
-            pairs,
-            density[:, None],
-            density[j],
-            c0,
-            h,
-            params.artificial_alpha,
-            params.artificial_beta,
+            v_ab, pairs, density[:, None], density[j], c0, h,
+            params.artificial_alpha, params.artificial_beta,
         )
         pi_ab = jnp.where(pairs_viscous.mask, pi_ab, 0.0)
     acceleration = pressure_acceleration(mass, density, pressure, pairs_hydro, pi_ab)

@@ -98,9 +98,7 @@ def make_state(position, velocity, density, mass, kind, volume=None) -> State:
     density = jnp.broadcast_to(jnp.asarray(density, dtype), (n,))
     mass = jnp.broadcast_to(jnp.asarray(mass, dtype), (n,))
     kind = jnp.broadcast_to(jnp.asarray(kind, jnp.int32), (n,))
-    volume = (
-        mass / density if volume is None else jnp.broadcast_to(jnp.asarray(volume, dtype), (n,))
-    )
+    volume = mass / density if volume is None else jnp.broadcast_to(jnp.asarray(volume, dtype), (n,))
     return State(
         position=position,
         velocity=velocity,

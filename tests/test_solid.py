@@ -52,8 +52,9 @@ def _lattice(n, dim=2):
     return np.stack(np.meshgrid(*[g] * dim, indexing="ij"), -1).reshape(-1, dim)
 
 
-def _setup(n=9, dim=2, kernel=CubicSpline(), h=H, penalty=False, **params):
+def _setup(n=9, dim=2, kernel=None, h=H, penalty=False, **params):
     X = _lattice(n, dim)
+    kernel = CubicSpline() if kernel is None else kernel
     model = Model(
         dim=dim,
         smoothing_length=h,

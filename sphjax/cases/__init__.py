@@ -38,9 +38,7 @@ def get(name: str, **kwargs):
     try:
         factory = CASES[name]
     except KeyError:
-        raise ValueError(
-            f"unknown case {name!r}; available cases: {', '.join(sorted(CASES))}"
-        ) from None
+        raise ValueError(f"unknown case {name!r}; available cases: {', '.join(sorted(CASES))}") from None
     return factory(**kwargs)
 
 

@@ -133,11 +133,12 @@ def oscillating_plate(
 
     The plate ``[0, L] x [-H/2, H/2]`` continues into ``[-clamp_length, 0]`` as clamped
     particles (fixed); of these only the ones within two kernel supports of the plate are
-    kept (the others cannot act on it), so ``clamp_length`` beyond that changes nothing.  Initial transverse velocity ``v_y(x) = V_f c0 f(x / L)`` with the
-    mode shape :func:`plate_mode_shape`; ``c0 = sqrt(K / rho)`` with the three-dimensional
-    bulk modulus ``K = E / (3 (1 - 2 nu))`` as in Gray et al., which gives the reference
-    tip amplitude ``V_f c0 / omega = 2.31e-3 m`` for ``V_f = 0.001``.  Linear theory:
-    period ``2 pi / omega = 0.2541 s`` (:func:`plate_angular_frequency`).
+    kept (the others cannot act on it), so ``clamp_length`` beyond that changes nothing.
+    Initial transverse velocity ``v_y(x) = V_f c0 f(x / L)`` with the mode shape
+    :func:`plate_mode_shape`; ``c0 = sqrt(K / rho)`` with the three-dimensional bulk
+    modulus ``K = E / (3 (1 - 2 nu))`` as in Gray et al., which gives the reference tip
+    amplitude ``V_f c0 / omega = 2.31e-3 m`` for ``V_f = 0.001``.  Linear theory: period
+    ``2 pi / omega = 0.2541 s`` (:func:`plate_angular_frequency`).
 
     Args:
       n: particles across the thickness (``dx = H / n``).
