@@ -26,7 +26,7 @@ PLATE_TIP_AMPLITUDE = 2.31e-3  # m, V_f c0 / omega for V_f = 0.001, VALIDATION.m
 CSM3_UY_MEAN, CSM3_UY_AMPLITUDE, CSM3_FREQUENCY = -63.607e-3, 65.160e-3, 1.0995
 
 PLATE_N = 12
-CSM3_N = 8
+CSM3_N = 12
 
 
 @pytest.mark.slow
