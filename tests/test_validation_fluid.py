@@ -65,7 +65,6 @@ def test_hydrostatic_tank_holds_still():
     fluid = np.asarray(case.state.kind) == Kind.FLUID
     final = traj.final
     x = np.asarray(final.position)[fluid]
-    v = np.asarray(final.velocity)[fluid]
     p = np.asarray(final.pressure)[fluid]
     assert np.all(x[:, 1] > 0) and np.all(x[:, 0] > 0) and np.all(x[:, 0] < W)
     speeds = np.linalg.norm(np.asarray(traj.states.velocity)[-2:, fluid], axis=-1)
@@ -77,8 +76,15 @@ def test_hydrostatic_tank_holds_still():
 
 # Martin & Moyce (1952), digitised (T, Z/L), from VALIDATION.md
 MARTIN_MOYCE = [
-    (0.0, 1.0), (0.381, 1.111), (0.769, 1.252), (1.153, 1.505), (1.537, 1.892),
-    (1.935, 2.241), (2.323, 2.615), (2.719, 3.003), (3.096, 3.624),
+    (0.0, 1.0),
+    (0.381, 1.111),
+    (0.769, 1.252),
+    (1.153, 1.505),
+    (1.537, 1.892),
+    (1.935, 2.241),
+    (2.323, 2.615),
+    (2.719, 3.003),
+    (3.096, 3.624),
 ]
 
 

@@ -28,8 +28,17 @@ from sphjax.cases import poiseuille_startup_speed, surge_front  # noqa: E402
 
 DOCS = pathlib.Path(__file__).resolve().parents[1]
 MARTIN_MOYCE = np.array(
-    [(0.0, 1.0), (0.381, 1.111), (0.769, 1.252), (1.153, 1.505), (1.537, 1.892),
-     (1.935, 2.241), (2.323, 2.615), (2.719, 3.003), (3.096, 3.624)]
+    [
+        (0.0, 1.0),
+        (0.381, 1.111),
+        (0.769, 1.252),
+        (1.153, 1.505),
+        (1.537, 1.892),
+        (1.935, 2.241),
+        (2.323, 2.615),
+        (2.719, 3.003),
+        (3.096, 3.624),
+    ]
 )
 
 
@@ -52,8 +61,16 @@ def taylor_green(n, rows):
     for t_ref in (0.5, 1.0):
         i = int(np.argmin(abs(t - t_ref)))
         err = ke[i] / ke[0] / exact[i] - 1
-        rows.append(("taylor_green", f"n={n}", f"KE/KE0 at t={t[i]:.3f}", f"{exact[i]:.4f}",
-                     f"{ke[i] / ke[0]:.4f}", f"{err:+.2%}"))
+        rows.append(
+            (
+                "taylor_green",
+                f"n={n}",
+                f"KE/KE0 at t={t[i]:.3f}",
+                f"{exact[i]:.4f}",
+                f"{ke[i] / ke[0]:.4f}",
+                f"{err:+.2%}",
+            )
+        )
     plt.figure(figsize=(5, 3.5))
     plt.semilogy(t, ke / ke[0], label=f"sphjax n={n}")
     plt.semilogy(t, exact, "k--", label="exp(-16 pi^2 nu t)")
@@ -78,8 +95,16 @@ def poiseuille(n, rows):
         near = np.abs(y - L / 2) < 0.6 * dx
         u_c = float(np.mean(u[near])) + F / (2 * nu) * (dx / 2) ** 2
         ref = poiseuille_startup_speed(L / 2, t[i], L, nu, F)
-        rows.append(("poiseuille", f"n={n}", f"u(L/2) at t={t[i]:.4f}", f"{ref:.4e}",
-                     f"{u_c:.4e}", f"{u_c / ref - 1:+.2%}"))
+        rows.append(
+            (
+                "poiseuille",
+                f"n={n}",
+                f"u(L/2) at t={t[i]:.4f}",
+                f"{ref:.4e}",
+                f"{u_c:.4e}",
+                f"{u_c / ref - 1:+.2%}",
+            )
+        )
         yy = np.linspace(0, L, 100)
         plt.plot(poiseuille_startup_speed(yy, t[i], L, nu, F), yy, "k-", lw=0.8)
         plt.plot(u, y, ".", ms=2, label=f"t={t[i]:.3f}")
@@ -100,11 +125,20 @@ def hydrostatic(n, rows):
     g, H = info["gravity"], info["height"]
     _, bottom = np.polyfit(x[:, 1], p, 1)
     ref = 1000 * g * H
-    rows.append(("hydrostatic_tank", f"n={n}", "bottom pressure (Pa), t=2 s", f"{ref:.1f}",
-                 f"{bottom:.1f}", f"{bottom / ref - 1:+.2%}"))
+    rows.append(
+        (
+            "hydrostatic_tank",
+            f"n={n}",
+            "bottom pressure (Pa), t=2 s",
+            f"{ref:.1f}",
+            f"{bottom:.1f}",
+            f"{bottom / ref - 1:+.2%}",
+        )
+    )
     vmax = np.linalg.norm(v, axis=-1).max() / np.sqrt(g * H)
-    rows.append(("hydrostatic_tank", f"n={n}", "max speed / sqrt(gH), t=2 s", "< 0.01",
-                 f"{vmax:.2e}", ""))
+    rows.append(
+        ("hydrostatic_tank", f"n={n}", "max speed / sqrt(gH), t=2 s", "< 0.01", f"{vmax:.2e}", "")
+    )
     plt.figure(figsize=(4, 3.5))
     plt.plot(p, x[:, 1], ".", ms=2, label="sphjax")
     yy = np.linspace(0, H, 50)
@@ -124,8 +158,16 @@ def dam_break(n, rows):
     for T_ref, Z_ref in MARTIN_MOYCE:
         if 1.0 <= T_ref <= 2.5:
             z = float(np.interp(T_ref, T, Z))
-            rows.append(("dam_break", f"n={n}", f"Z/L at T={T_ref}", f"{Z_ref}", f"{z:.3f}",
-                         f"{z / Z_ref - 1:+.2%}"))
+            rows.append(
+                (
+                    "dam_break",
+                    f"n={n}",
+                    f"Z/L at T={T_ref}",
+                    f"{Z_ref}",
+                    f"{z:.3f}",
+                    f"{z / Z_ref - 1:+.2%}",
+                )
+            )
     plt.figure(figsize=(5, 3.5))
     plt.plot(T, Z, label=f"sphjax n={n}")
     plt.plot(MARTIN_MOYCE[:, 0], MARTIN_MOYCE[:, 1], "ko", label="Martin & Moyce (1952)")
@@ -157,8 +199,10 @@ def main():
     ]
     lines += ["| " + " | ".join(r) + " |" for r in rows]
     lines += ["", "Wall time (s): " + ", ".join(f"{k} {v:.0f}" for k, v in walls.items()), ""]
-    lines += [f"![{name}](img/{name}.png)" for name in
-              ("taylor_green_ke", "poiseuille", "hydrostatic", "dam_break_front")]
+    lines += [
+        f"![{name}](img/{name}.png)"
+        for name in ("taylor_green_ke", "poiseuille", "hydrostatic", "dam_break_front")
+    ]
     (DOCS / "validation_fluid.md").write_text("\n".join(lines) + "\n")
     print("\n".join(lines))
 
