@@ -56,7 +56,10 @@ def _positive_int(text: str) -> int:
 def _parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="sphjax",
-        description="Differentiable SPH in JAX: run a case, plot a saved frame, list cases.",
+        description=(
+            "Differentiable SPH in JAX: run a case, plot a saved frame, list cases, "
+            "generate a learned-surrogate dataset."
+        ),
     )
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
 
@@ -102,6 +105,10 @@ def _parser() -> argparse.ArgumentParser:
     plot.add_argument("--out", required=True, help="output image, e.g. frame.png")
 
     sub.add_parser("cases", help="list the available cases", description="List the cases.")
+
+    from sphjax.dataset import add_dataset_parser
+
+    add_dataset_parser(sub)
     return parser
 
 
@@ -350,7 +357,13 @@ def _spacing(meta, extent) -> float:
 # ---------------------------------------------------------------------------- main
 
 
-COMMANDS = {"run": cmd_run, "plot": cmd_plot, "cases": cmd_cases}
+def cmd_dataset(args) -> int:
+    from sphjax.dataset import main_dataset
+
+    return main_dataset(args)
+
+
+COMMANDS = {"run": cmd_run, "plot": cmd_plot, "cases": cmd_cases, "dataset": cmd_dataset}
 
 
 def main(argv: list[str] | None = None) -> int:
