@@ -15,12 +15,21 @@ from sphjax.cases.fluid import (
     surge_front,
     taylor_green,
 )
+from sphjax.cases.solid import (
+    oscillating_plate,
+    oscillation_stats,
+    plate_mode_shape,
+    tip_displacement,
+    turek_hron_csm,
+)
 
 CASES = {
     "taylor_green": taylor_green,
     "poiseuille": poiseuille,
     "hydrostatic_tank": hydrostatic_tank,
     "dam_break": dam_break,
+    "oscillating_plate": oscillating_plate,
+    "turek_hron_csm": turek_hron_csm,
 }
 
 
@@ -42,4 +51,9 @@ __all__ = [
     "hydrostatic_tank",
     "dam_break",
     "surge_front",
+    "oscillating_plate",
+    "turek_hron_csm",
+    "tip_displacement",
+    "oscillation_stats",
+    "plate_mode_shape",
 ]
