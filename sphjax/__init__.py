@@ -9,7 +9,10 @@ Weakly compressible fluids and total-Lagrangian elastic solids as pure functions
 """
 
 from sphjax import cases, kernels
+from sphjax._solver import KickDriftKick
+from sphjax.calibrate import CalibrationResult, calibrate
 from sphjax.case import Case
+from sphjax.diffrax_solver import diffeqsolve_case
 from sphjax.integrate import (
     NeighborOverflowError,
     SimulationError,
@@ -24,6 +27,10 @@ from sphjax.timestep import stable_time_step
 __version__ = "0.1.0"
 
 __all__ = [
+    "CalibrationResult",
+    "KickDriftKick",
+    "calibrate",
+    "diffeqsolve_case",
     "Case",
     "Domain",
     "Kind",
