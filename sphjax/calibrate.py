@@ -6,8 +6,9 @@ The loop accepts any optax optimiser (``optax.adam(0.05)``, ``optax.lbfgs()``, a
 * a loss: the mean squared misfit between simulated observables and observed data,
   normalised by the mean square of the data (so 1e-4 means a 1 % RMS misfit);
 * a parameterisation: each fitted Params field is optimised as ``log(value)``
-  (``"log"``, the default: keeps E, nu, viscosities positive and makes steps relative)
-  or as itself (``"identity"``);
+  (``"log"``, the default: keeps E, nu, viscosities positive and makes steps relative),
+  as itself (``"identity"``), or for a bounded field as ``logit`` of its position in an
+  interval ``(lo, hi)`` (e.g. ``(0.0, 0.5)`` for Poisson's ratio);
 * a progress line per iteration and a history of loss, gradient norm and parameters.
 
     result = calibrate(
@@ -37,6 +38,19 @@ TRANSFORMS = {
     "log": (jnp.log, jnp.exp),
     "identity": (lambda x: x, lambda x: x),
 }
+
+
+def _interval(lo, hi):
+    """``x in (lo, hi)`` optimised as ``logit((x - lo) / (hi - lo))``."""
+
+    def forward(x):
+        s = (x - lo) / (hi - lo)
+        return jnp.log(s) - jnp.log1p(-s)
+
+    def backward(theta):
+        return lo + (hi - lo) * jax.nn.sigmoid(theta)
+
+    return forward, backward
 
 
 @dataclasses.dataclass
@@ -78,7 +92,7 @@ def calibrate(
     optimizer: optax.GradientTransformation,
     n_iterations: int = 100,
     *,
-    transform: str | Mapping[str, str] = "log",
+    transform: str | tuple | Mapping[str, str | tuple] = "log",
     weights=None,
     loss_tolerance: float | None = None,
     step_tolerance: float | None = None,
@@ -99,7 +113,8 @@ def calibrate(
         arguments (``optax.lbfgs`` line search) receive ``value``, ``grad`` and
         ``value_fn``.
       n_iterations: maximum number of updates.
-      transform: ``"log"`` (default) or ``"identity"``, or a mapping per field.
+      transform: ``"log"`` (default), ``"identity"`` or an interval ``(lo, hi)``, or a
+        mapping per field.
       weights: optional per-entry weights for :func:`relative_misfit`.
       loss_tolerance: stop once the loss is below this.
       step_tolerance: stop once every fitted value changes by less than this
@@ -119,17 +134,29 @@ def calibrate(
             )
     if isinstance(transform, str):
         transform = dict.fromkeys(names, transform)
+    pairs = {}
     for name in names:
         kind = transform.get(name, "log")
+        if isinstance(kind, tuple):
+            lo, hi = (float(b) for b in kind)
+            if not lo < float(initial[name]) < hi:
+                raise ValueError(
+                    f"initial[{name!r}] = {initial[name]} must lie inside its interval {kind}"
+                )
+            pairs[name] = _interval(lo, hi)
+            continue
         if kind not in TRANSFORMS:
-            raise ValueError(f"transform[{name!r}] must be one of {sorted(TRANSFORMS)}")
+            raise ValueError(
+                f"transform[{name!r}] must be one of {sorted(TRANSFORMS)} or an interval (lo, hi)"
+            )
+        pairs[name] = TRANSFORMS[kind]
         if kind == "log" and not float(initial[name]) > 0:
             raise ValueError(
                 f"initial[{name!r}] = {initial[name]} must be positive for the log "
                 "parameterisation; pass transform={name!r: 'identity'} for signed values"
             )
-    forward = {n: TRANSFORMS[transform.get(n, "log")][0] for n in names}
-    backward = {n: TRANSFORMS[transform.get(n, "log")][1] for n in names}
+    forward = {n: pairs[n][0] for n in names}
+    backward = {n: pairs[n][1] for n in names}
     dtype = jnp.result_type(float)
 
     def to_params(theta):
