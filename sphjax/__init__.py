@@ -14,7 +14,10 @@ from sphjax._xla import apply_default_flags
 apply_default_flags()  # before any JAX backend exists; see sphjax/_xla.py
 
 from sphjax import cases, io, kernels
+from sphjax._solver import KickDriftKick
+from sphjax.calibrate import CalibrationResult, calibrate
 from sphjax.case import Case
+from sphjax.diffrax_solver import diffeqsolve_case
 from sphjax.integrate import (
     NeighborOverflowError,
     SimulationError,
@@ -30,6 +33,10 @@ from sphjax.timestep import stable_time_step
 __version__ = "0.1.0"
 
 __all__ = [
+    "CalibrationResult",
+    "KickDriftKick",
+    "calibrate",
+    "diffeqsolve_case",
     "Case",
     "Domain",
     "Kind",

@@ -114,8 +114,12 @@ def _overflowed(neighbors: Neighbors):
 # ---------------------------------------------------------------------------- one step
 
 
-def kick_drift_kick(state: State, neighbors: Neighbors, dt, model: Model, params: Params):
-    """Advance one step of size ``dt``; returns ``(state, neighbors)``."""
+def kick_drift(state: State, dt, model: Model) -> State:
+    """First half of a step: half kick with the stored rates, then a full drift.
+
+    Returns the State at ``t + dt`` with half-step velocities; its rates
+    are still those of ``t`` (the caller evaluates them at the new positions).
+    """
     kind = state.kind
     free = ((kind == Kind.FLUID) | (kind == Kind.SOLID))[:, None]
     half = 0.5 * dt
@@ -132,11 +136,27 @@ def kick_drift_kick(state: State, neighbors: Neighbors, dt, model: Model, params
     else:
         position = jnp.where((kind == Kind.CLAMPED)[:, None], state.position, position)
     position = wrap_fn(model.domain)(position)
-    neighbors = _update_neighbors(position, neighbors, model)
-    state = state.replace(position=position, velocity=velocity, time=time)
+    return state.replace(position=position, velocity=velocity, time=time)
+
+
+def closing_kick(state: State, dt) -> State:
+    """Second half of a step: half kick with the freshly evaluated accelerations."""
+    free = ((state.kind == Kind.FLUID) | (state.kind == Kind.SOLID))[:, None]
+    velocity = jnp.where(free, state.velocity + 0.5 * dt * state.acceleration, state.velocity)
+    return state.replace(velocity=velocity)
+
+
+def kick_drift_kick(state: State, neighbors: Neighbors, dt, model: Model, params: Params):
+    """Advance one step of size ``dt``; returns ``(state, neighbors)``.
+
+    :func:`kick_drift`, a right-hand-side evaluation at the new positions that also
+    advances the continuity density by ``dt`` (``evaluate(..., density_step=dt)``), then
+    :func:`closing_kick` (both shared with the diffrax solver ``sphjax.KickDriftKick``).
+    """
+    state = kick_drift(state, dt, model)
+    neighbors = _update_neighbors(state.position, neighbors, model)
     state = evaluate(state, neighbors, model, params, density_step=dt)
-    velocity = jnp.where(free, state.velocity + half * state.acceleration, state.velocity)
-    return state.replace(velocity=velocity), neighbors
+    return closing_kick(state, dt), neighbors
 
 
 def unhealthy(state: State, model: Model):
@@ -295,7 +315,10 @@ def simulate(
     dt = jnp.asarray(dt, state.position.dtype)
 
     neighbor_state = state if not _is_traced(state) else case.state
-    neighbors = build_neighbors(neighbor_state, model)
+    # Allocation needs concrete values; inside an outer ``jit`` the jax-md set-up would
+    # otherwise be staged out and fail on a traced box size.
+    with jax.ensure_compile_time_eval():
+        neighbors = build_neighbors(neighbor_state, model)
     failure = -jnp.ones(2, jnp.int32)
     step = jnp.zeros((), jnp.int32)
 
