@@ -30,7 +30,7 @@ def taylor_green(
     speed: float = 1.0,
     sound_speed_factor: float = 10.0,
     kernel="quintic_spline",
-    h_factor: float = 1.0,
+    h_factor: float = 1.2,
     density: str = "summation",
     reference_pressure_factor: float = 0.0,
     density_diffusion: str | None = None,
@@ -48,7 +48,8 @@ def taylor_green(
     ``p = -(U^2 / 4)(cos 4 pi x + cos 4 pi y)``, ``nu = U / Re``, ``c0 = 10 U``.
     Kinetic energy decays as ``exp(-16 pi^2 nu t)``.
 
-    Defaults: summation density, linear equation of state, the transport-velocity
+    Defaults: quintic spline with ``h = 1.2 dx``, summation density, linear equation of
+    state, the transport-velocity
     formulation (Adami et al. 2013, ``p_b = rho0 c0^2``) and particles displaced from the
     square lattice by up to ``disorder * dx`` (seeded).  On a perfect lattice the
     hyperbolic stagnation points squeeze the particle rows into lines after
