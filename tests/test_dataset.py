@@ -145,7 +145,7 @@ def test_bad_arguments_are_named():
 
 
 def test_cli_parses_the_dataset_command():
-    from sphjax.cli import build_parser
+    from sphjax.cli import _parser as build_parser
 
     args = build_parser().parse_args(
         [

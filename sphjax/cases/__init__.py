@@ -7,6 +7,9 @@ differentiable Params, a stable time step and a default end time).
 
 from __future__ import annotations
 
+import inspect
+
+from sphjax.cases._resolution import n_for_spacing
 from sphjax.cases.fluid import (
     dam_break,
     hydrostatic_tank,
@@ -15,21 +18,47 @@ from sphjax.cases.fluid import (
     surge_front,
     taylor_green,
 )
+from sphjax.cases.solid import (
+    oscillating_plate,
+    oscillation_stats,
+    plate_mode_shape,
+    tip_displacement,
+    turek_hron_csm,
+)
 
 CASES = {
     "taylor_green": taylor_green,
     "poiseuille": poiseuille,
     "hydrostatic_tank": hydrostatic_tank,
     "dam_break": dam_break,
+    "oscillating_plate": oscillating_plate,
+    "turek_hron_csm": turek_hron_csm,
 }
 
 
-def get(name: str, **kwargs):
-    """Build the case called ``name`` (see ``CASES``) with keyword arguments."""
+def get(name: str, *, dx: float | None = None, **kwargs):
+    """Build the case called ``name`` (see ``CASES``) with keyword arguments.
+
+    ``dx`` gives the resolution as a particle spacing instead of ``n`` (``n = L / dx``
+    rounded, ``L`` the case's length scale; see ``case.info["dx"]`` for the one used).
+    """
     try:
         factory = CASES[name]
     except KeyError:
-        raise ValueError(f"unknown case {name!r}; available cases: {', '.join(sorted(CASES))}") from None
+        raise ValueError(
+            f"unknown case {name!r}; available cases: {', '.join(sorted(CASES))}"
+        ) from None
+    accepted = inspect.signature(factory).parameters
+    unknown = sorted(set(kwargs) - set(accepted))
+    if unknown:
+        raise ValueError(
+            f"case {name!r} has no argument {', '.join(map(repr, unknown))}; "
+            f"it accepts {', '.join(accepted)}"
+        )
+    if dx is not None:
+        if "n" in kwargs:
+            raise ValueError("give either n or dx, not both")
+        kwargs["n"] = n_for_spacing(factory, dx, **kwargs)
     return factory(**kwargs)
 
 
@@ -42,4 +71,9 @@ __all__ = [
     "hydrostatic_tank",
     "dam_break",
     "surge_front",
+    "oscillating_plate",
+    "turek_hron_csm",
+    "tip_displacement",
+    "oscillation_stats",
+    "plate_mode_shape",
 ]

@@ -1,0 +1,336 @@
+"""Elastic-solid validation cases (VALIDATION.md, "Solid cases"), total-Lagrangian SPH.
+
+* :func:`oscillating_plate` — Gray, Monaghan & Swift (2001) cantilever plate, clamped over
+  an extra length, released with the first bending mode as velocity profile.
+* :func:`turek_hron_csm` — the Turek & Hron (2006) CSM beam behind a rigid cylinder under
+  gravity (CSM3: from rest, undamped).
+
+Both return a :class:`sphjax.Case` whose ``info`` holds ``tip_index`` (the probe particle,
+on the beam's centre line at its free end), ``tip_indices`` (the one or two particles the
+probe averages: two when the centre line falls between particle rows) and the reference
+numbers.  :func:`tip_displacement` turns a trajectory into the tip displacement ``[T, d]``;
+:func:`oscillation_stats` extracts mean, amplitude and period from a signal.
+"""
+
+from __future__ import annotations
+
+import math
+
+import jax.numpy as jnp
+import numpy as np
+
+from sphjax.case import Case
+from sphjax.cases._geometry import check_positive, check_resolution
+from sphjax.kernels import kernel_by_name
+from sphjax.state import Domain, Kind, Model, make_params, make_state
+from sphjax.timestep import stable_time_step
+
+# Gray, Monaghan & Swift (2001) first bending mode: k L = 1.87510 (VALIDATION.md).
+PLATE_KL = 1.8751040687
+
+
+def _kernel(kernel):
+    return kernel_by_name(kernel) if isinstance(kernel, str) else kernel
+
+
+def plate_mode_shape(s, kL: float = PLATE_KL):
+    """Cantilever mode shape ``f(s)``, ``s = x / L``, normalised so that ``f(1) = 1``.
+
+    ``f(s) = [M (cos kLs - cosh kLs) - N (sin kLs - sinh kLs)] / Q`` with
+    ``M = sin kL + sinh kL``, ``N = cos kL + cosh kL``,
+    ``Q = 2 (cos kL sinh kL - sin kL cosh kL)`` (VALIDATION.md, oscillating plate).
+    """
+    s = np.asarray(s, float)
+    M = math.sin(kL) + math.sinh(kL)
+    N = math.cos(kL) + math.cosh(kL)
+    Q = 2.0 * (math.cos(kL) * math.sinh(kL) - math.sin(kL) * math.cosh(kL))
+    a = kL * s
+    return (M * (np.cos(a) - np.cosh(a)) - N * (np.sin(a) - np.sinh(a))) / Q
+
+
+def plate_angular_frequency(
+    length, thickness, young_modulus, density, poisson_ratio, kL: float = PLATE_KL
+) -> float:
+    """Linear-theory ``omega`` of the plate: ``omega^2 = E H^2 k^4 / (12 rho (1 - nu^2))``."""
+    k = kL / length
+    return math.sqrt(
+        young_modulus * thickness**2 * k**4 / (12.0 * density * (1.0 - poisson_ratio**2))
+    )
+
+
+def _strip(x0, y0, nx, ny, dx, i_start=0):
+    """Lattice points ``(x0 + (i + 1/2) dx, y0 + (j + 1/2) dx)``, ``i_start <= i < nx``."""
+    i = np.arange(i_start, nx)
+    j = np.arange(ny)
+    gx, gy = np.meshgrid(x0 + (i + 0.5) * dx, y0 + (j + 0.5) * dx, indexing="ij")
+    return np.stack([gx.ravel(), gy.ravel()], axis=-1)
+
+
+def _tip_indices(x, kind, y_centre, dx):
+    """Particles of the free end's column closest to the centre line ``y = y_centre``."""
+    solid = np.flatnonzero(kind == Kind.SOLID)
+    x_max = x[solid, 0].max()
+    column = solid[np.abs(x[solid, 0] - x_max) < 1e-6 * dx]
+    dist = np.abs(x[column, 1] - y_centre)
+    return column[dist < dist.min() + 1e-6 * dx]
+
+
+def _solid_model(kernel, h, domain, penalty):
+    return Model(
+        dim=2,
+        smoothing_length=h,
+        kernel=kernel,
+        domain=domain,
+        artificial_viscosity=False,
+        solid_penalty=penalty,
+        particle_kinds=(Kind.SOLID, Kind.CLAMPED),
+    )
+
+
+def _finish(name, x, velocity, kind, dx, rho, model, params, t_end, info, cfl):
+    volume = dx**2
+    state = make_state(x, velocity, rho, rho * volume, kind, volume=volume)
+    dt = stable_time_step(state, model, params, solid_cfl=cfl)
+    tips = _tip_indices(x, kind, info["centre_line"], dx)
+    info = dict(
+        info,
+        dx=dx,
+        tip_index=int(tips[0]),
+        tip_indices=tuple(int(i) for i in tips),
+        n_solid=int(np.sum(kind == Kind.SOLID)),
+        n_clamped=int(np.sum(kind == Kind.CLAMPED)),
+    )
+    return Case(name=name, state=state, model=model, params=params, dt=dt, t_end=t_end, info=info)
+
+
+def oscillating_plate(
+    n: int = 12,
+    amplitude: float = 0.001,
+    length: float = 0.2,
+    thickness: float = 0.02,
+    clamp_length: float = 0.06,
+    young_modulus: float = 2.0e6,
+    poisson_ratio: float = 0.3975,
+    density: float = 1000.0,
+    kernel="wendland_c2",
+    h_factor: float = 1.2,
+    penalty_alpha: float | None = None,
+    cfl: float = 0.3,
+    t_end: float = 0.6,
+) -> Case:
+    """Oscillating cantilever plate (Gray, Monaghan & Swift 2001), plane strain.
+
+    The plate ``[0, L] x [-H/2, H/2]`` continues into ``[-clamp_length, 0]`` as clamped
+    particles (fixed); of these only the ones within two kernel supports of the plate are
+    kept (the others cannot act on it), so ``clamp_length`` beyond that changes nothing.
+    Initial transverse velocity ``v_y(x) = V_f c0 f(x / L)`` with the mode shape
+    :func:`plate_mode_shape`; ``c0 = sqrt(K / rho)`` with the three-dimensional bulk
+    modulus ``K = E / (3 (1 - 2 nu))`` as in Gray et al., which gives the reference tip
+    amplitude ``V_f c0 / omega = 2.31e-3 m`` for ``V_f = 0.001``.  Linear theory: period
+    ``2 pi / omega = 0.2541 s`` (:func:`plate_angular_frequency`).
+
+    Args:
+      n: particles across the thickness (``dx = H / n``).
+      amplitude: ``V_f``.
+      kernel, h_factor: kernel name and ``h = h_factor dx`` (Wendland C2, ``1.2 dx``: the
+        setting validated in docs/validation_solid.md).
+      penalty_alpha: ``None`` (no penalty force) or Ganzenmüller's ``alpha``.
+      cfl: solid Courant number of the time step.
+    """
+    n = check_resolution("n", n, 2)
+    L = check_positive("length", length)
+    H = check_positive("thickness", thickness)
+    E = check_positive("young_modulus", young_modulus)
+    rho = check_positive("density", density)
+    if not amplitude >= 0:
+        raise ValueError(f"amplitude (V_f) must be >= 0, got {amplitude}")
+    if not clamp_length >= 0:
+        raise ValueError(f"clamp_length must be >= 0, got {clamp_length}")
+    dx = H / n
+    nx = int(round(L / dx))
+    n_clamp = int(round(clamp_length / dx))
+    x = _strip(0.0, -0.5 * H, nx, n, dx, i_start=-n_clamp)
+    kind = np.where(x[:, 0] > 0.0, Kind.SOLID, Kind.CLAMPED).astype(np.int32)
+    kernel = _kernel(kernel)
+    h = h_factor * dx
+    # clamped particles further than two kernel supports from the plate cannot act on it
+    keep = x[:, 0] > -2.0 * kernel.support * h
+    x, kind = x[keep], kind[keep]
+    c0 = math.sqrt(E / (3.0 * (1.0 - 2.0 * poisson_ratio)) / rho)
+    velocity = np.zeros_like(x)
+    solid = kind == Kind.SOLID
+    velocity[solid, 1] = amplitude * c0 * plate_mode_shape(x[solid, 0] / L)
+    omega = plate_angular_frequency(L, H, E, rho, poisson_ratio)
+    params = make_params(
+        2,
+        young_modulus=E,
+        poisson_ratio=poisson_ratio,
+        solid_density=rho,
+        penalty_alpha=0.0 if penalty_alpha is None else penalty_alpha,
+    )
+    margin = L
+    domain = Domain((-clamp_length - margin, -margin), (L + margin, margin), (False, False))
+    model = _solid_model(kernel, h, domain, penalty_alpha is not None)
+    info = dict(
+        n=n,
+        length=L,
+        thickness=H,
+        clamp_length=n_clamp * dx,
+        amplitude=amplitude,
+        sound_speed=c0,
+        omega=omega,
+        period=2.0 * math.pi / omega,
+        tip_amplitude=amplitude * c0 / omega,
+        centre_line=0.0,
+    )
+    return _finish("oscillating_plate", x, velocity, kind, dx, rho, model, params, t_end, info, cfl)
+
+
+# Turek & Hron (2006) CSM3 reference (VALIDATION.md): tip u_y = -63.607 +- 65.160 mm,
+# u_x = -14.305 +- 14.305 mm, 1.0995 Hz.
+TUREK_HRON_CSM3 = dict(
+    uy_mean=-63.607e-3,
+    uy_amplitude=65.160e-3,
+    ux_mean=-14.305e-3,
+    ux_amplitude=14.305e-3,
+    frequency=1.0995,
+)
+
+
+def turek_hron_csm(
+    n: int = 12,
+    young_modulus: float = 1.4e6,
+    poisson_ratio: float = 0.4,
+    density: float = 1000.0,
+    gravity: float = 2.0,
+    kernel="wendland_c2",
+    h_factor: float = 1.2,
+    penalty_alpha: float | None = None,
+    cfl: float = 0.3,
+    t_end: float = 2.0,
+    clamp: str = "cylinder",
+) -> Case:
+    """Turek-Hron CSM beam (CSM3 with the defaults): elastic beam behind a rigid cylinder.
+
+    Cylinder centre ``(0.2, 0.2)``, radius 0.05; beam ``0.35 x 0.02`` from ``x = 0.25`` to
+    the tip point A ``(0.6, 0.2)``; ``rho = 1000``, ``nu = 0.4``, gravity 2 m/s^2 down,
+    St Venant-Kirchhoff in plane strain, from rest and undamped.
+
+    The rigid cylinder is modelled by clamped particles on the beam's own lattice,
+    continued to the left of ``x = 0.25`` at the lattice sites inside the circle (only
+    those within two kernel supports of the beam, the rest cannot influence it).  So the
+    beam's root sits against the cylinder's curved surface as in the benchmark, and the
+    clamped particles share the beam's regular spacing.
+
+    Args:
+      n: particles across the beam thickness 0.02 (``dx = 0.02 / n``).
+      young_modulus: 1.4e6 (CSM1, CSM3) or 5.6e6 (CSM2).
+      kernel, h_factor: kernel name and ``h = h_factor dx`` (Wendland C2, ``1.2 dx``).
+      penalty_alpha: ``None`` (no penalty force) or Ganzenmüller's ``alpha``.
+      cfl: solid Courant number of the time step (0.5 gives the same tip curve).
+      clamp: ``"cylinder"`` (clamped lattice sites inside the cylinder, the default) or
+        ``"strip"`` (the beam continued to the left of ``x = 0.25`` as clamped particles,
+        like the plate's clamp; for comparison).
+    """
+    n = check_resolution("n", n, 2)
+    E = check_positive("young_modulus", young_modulus)
+    rho = check_positive("density", density)
+    if not gravity >= 0:
+        raise ValueError(f"gravity must be >= 0 (it points down), got {gravity}")
+    centre, radius = np.array([0.2, 0.2]), 0.05
+    x_root, thickness, length = 0.25, 0.02, 0.35
+    y_low = 0.2 - 0.5 * thickness
+    dx = thickness / n
+    nx = int(round(length / dx))
+    kernel = _kernel(kernel)
+    h = h_factor * dx
+    cutoff = kernel.support * h
+    n_back = int(math.ceil(2.0 * radius / dx)) + 1
+    n_up = int(math.ceil((radius + 2.0 * cutoff) / dx))
+    i = np.arange(-n_back, 0)
+    j = np.arange(-n_up, n + n_up)
+    gx, gy = np.meshgrid(x_root + (i + 0.5) * dx, y_low + (j + 0.5) * dx, indexing="ij")
+    cyl = np.stack([gx.ravel(), gy.ravel()], axis=-1)
+    if clamp == "cylinder":
+        inside = np.linalg.norm(cyl - centre, axis=-1) <= radius
+    elif clamp == "strip":
+        inside = (cyl[:, 1] > y_low) & (cyl[:, 1] < y_low + thickness)
+    else:
+        raise ValueError(f"clamp must be 'cylinder' or 'strip', got {clamp!r}")
+    # distance to the beam rectangle [x_root, x_root + L] x [y_low, y_low + H]
+    gap_y = np.maximum(0.0, np.maximum(y_low - cyl[:, 1], cyl[:, 1] - (y_low + thickness)))
+    gap_x = np.maximum(0.0, x_root - cyl[:, 0])
+    near = np.hypot(gap_x, gap_y) < 2.0 * cutoff
+    clamped = cyl[inside & near]
+    beam = _strip(x_root, y_low, nx, n, dx)
+    x = np.concatenate([beam, clamped])
+    kind = np.concatenate([np.full(len(beam), Kind.SOLID), np.full(len(clamped), Kind.CLAMPED)])
+    kind = kind.astype(np.int32)
+    params = make_params(
+        2,
+        young_modulus=E,
+        poisson_ratio=poisson_ratio,
+        solid_density=rho,
+        gravity=(0.0, -gravity),
+        penalty_alpha=0.0 if penalty_alpha is None else penalty_alpha,
+    )
+    domain = Domain((0.0, -0.2), (1.0, 0.61), (False, False))
+    model = _solid_model(kernel, h, domain, penalty_alpha is not None)
+    info = dict(
+        n=n,
+        young_modulus=E,
+        cylinder_centre=(0.2, 0.2),
+        cylinder_radius=radius,
+        tip_point=(0.6, 0.2),
+        centre_line=0.2,
+        reference=dict(TUREK_HRON_CSM3),
+    )
+    return _finish("turek_hron_csm", x, 0.0, kind, dx, rho, model, params, t_end, info, cfl)
+
+
+def tip_displacement(trajectory, case: Case):
+    """Tip displacement ``x - X`` of ``case.info["tip_indices"]`` (averaged), ``[T, d]``.
+
+    Args:
+      trajectory: a :class:`sphjax.Trajectory`, a State (with or without a leading time
+        axis) or a ``[T, N, d]`` / ``[N, d]`` position array.
+      case: the Case the trajectory was run from.
+    Returns:
+      ``[T, d]`` displacement of the probe; differentiable (jax.numpy).
+    """
+    states = getattr(trajectory, "states", trajectory)
+    position = getattr(states, "position", states)
+    position = jnp.asarray(position)
+    idx = jnp.asarray(case.info["tip_indices"])
+    anchor = case.state.reference_position[idx]
+    if position.ndim == 2:
+        position = position[None]
+    return jnp.mean(position[:, idx, :] - anchor, axis=-2)
+
+
+def oscillation_stats(times, signal) -> dict:
+    """Mean, amplitude, period and frequency of an oscillating signal (numpy).
+
+    ``mean = (max + min) / 2`` and ``amplitude = (max - min) / 2`` over the whole signal
+    (the convention of the Turek-Hron tables); the period is the mean spacing of
+    successive crossings of the mean level in the same direction (linear interpolation),
+    ``nan`` with fewer than two crossings in one direction.
+    """
+    t = np.asarray(times, float)
+    s = np.asarray(signal, float)
+    top, bottom = s.max(), s.min()
+    mean = 0.5 * (top + bottom)
+    d = s - mean
+    spacings = []
+    for rising in (True, False):
+        sel = (d[:-1] < 0) & (d[1:] >= 0) if rising else (d[:-1] > 0) & (d[1:] <= 0)
+        k = np.flatnonzero(sel)
+        tc = t[k] - d[k] * (t[k + 1] - t[k]) / (d[k + 1] - d[k])
+        spacings.extend(np.diff(tc))
+    period = float(np.mean(spacings)) if spacings else float("nan")
+    return dict(
+        mean=float(mean),
+        amplitude=float(0.5 * (top - bottom)),
+        period=period,
+        frequency=1.0 / period if spacings else float("nan"),
+    )
