@@ -151,7 +151,7 @@ class LearnedSimulator:
             hist, nbrs, over = carry
             new, nbrs = self.step(model, hist, types, nbrs)
             fixed = hist[-1] if kinematic is None else kinematic[k]
-            new = jnp.where(moving, new, fixed)
+            new = jnp.where(moving, new, fixed).astype(hist.dtype)
             hist = jnp.concatenate([hist[1:], new[None]], 0)
             return (hist, nbrs, over | overflowed(nbrs)), new
 
