@@ -8,7 +8,12 @@ Weakly compressible fluids and total-Lagrangian elastic solids as pure functions
     traj = sphjax.simulate(case, n_steps=1000, save_every=100)
 """
 
-from sphjax import cases, kernels
+# ruff: noqa: E402  (XLA flags must be set before the other imports)
+from sphjax._xla import apply_default_flags
+
+apply_default_flags()  # before any JAX backend exists; see sphjax/_xla.py
+
+from sphjax import cases, io, kernels
 from sphjax._solver import KickDriftKick
 from sphjax.calibrate import CalibrationResult, calibrate
 from sphjax.case import Case
@@ -20,6 +25,7 @@ from sphjax.integrate import (
     kick_drift_kick,
     simulate,
 )
+from sphjax.io import TrajectoryWriter, read_trajectory
 from sphjax.rhs import Neighbors, evaluate
 from sphjax.state import Domain, Kind, Model, Params, State, make_params, make_state
 from sphjax.timestep import stable_time_step
@@ -41,12 +47,15 @@ __all__ = [
     "SimulationError",
     "State",
     "Trajectory",
+    "TrajectoryWriter",
     "cases",
     "evaluate",
+    "io",
     "kernels",
     "kick_drift_kick",
     "make_params",
     "make_state",
+    "read_trajectory",
     "simulate",
     "stable_time_step",
     "__version__",

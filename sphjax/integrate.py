@@ -2,11 +2,14 @@
 
 Kick-drift-kick (velocity Verlet), one right-hand-side evaluation per step:
 
-    v_{n+1/2}   = v_n + dt/2 a_n                rho_{n+1/2} = rho_n + dt/2 Drho_n
-    x_{n+1}     = x_n + dt v_{n+1/2}
-    a_{n+1}, Drho_{n+1} = rhs(x_{n+1}, v_{n+1/2}, rho_{n+1/2})
-    v_{n+1}     = v_{n+1/2} + dt/2 a_{n+1}      rho_{n+1} = rho_{n+1/2} + dt/2 Drho_{n+1}
+    v_{n+1/2} = v_n + dt/2 a_n
+    x_{n+1}   = x_n + dt v_{n+1/2}
+    rho_{n+1} = rho_n + dt Drho(x_{n+1}, v_{n+1/2})          (continuity, eq. 11)
+    a_{n+1}   = a(x_{n+1}, v_{n+1/2}, rho_{n+1})
+    v_{n+1}   = v_{n+1/2} + dt/2 a_{n+1}
 
+Density lives at whole steps and velocity at half steps, the staggered leapfrog that is
+stable for the acoustic waves of weakly compressible SPH up to the usual Courant limit.
 For forces that depend on positions only (elastic solids, inviscid fluids with summation
 density) this is the symplectic Störmer-Verlet scheme.  The rates of the last evaluation
 are kept in the State, so they are not recomputed.
@@ -24,6 +27,7 @@ from __future__ import annotations
 import dataclasses
 import functools
 import math
+import operator
 import warnings
 from collections.abc import Callable
 
@@ -113,15 +117,16 @@ def _overflowed(neighbors: Neighbors):
 def kick_drift(state: State, dt, model: Model) -> State:
     """First half of a step: half kick with the stored rates, then a full drift.
 
-    Returns the State at ``t + dt`` with half-step velocities and densities; its rates
+    Returns the State at ``t + dt`` with half-step velocities; its rates
     are still those of ``t`` (the caller evaluates them at the new positions).
     """
     kind = state.kind
     free = ((kind == Kind.FLUID) | (kind == Kind.SOLID))[:, None]
     half = 0.5 * dt
     velocity = jnp.where(free, state.velocity + half * state.acceleration, state.velocity)
-    density = state.density + half * state.density_rate
-    position = state.position + dt * velocity  # walls move with their prescribed velocity
+    # walls move with their prescribed velocity; with the transport-velocity formulation
+    # fluid particles are advected with v~ = v_{n+1/2} + dt/2 a_b (Adami et al. 2013)
+    position = state.position + dt * (velocity + half * state.shift_acceleration)
     time = state.time + dt
     if model.clamped_motion is not None:
         clamped = (kind == Kind.CLAMPED)[:, None]
@@ -131,27 +136,26 @@ def kick_drift(state: State, dt, model: Model) -> State:
     else:
         position = jnp.where((kind == Kind.CLAMPED)[:, None], state.position, position)
     position = wrap_fn(model.domain)(position)
-    return state.replace(position=position, velocity=velocity, density=density, time=time)
+    return state.replace(position=position, velocity=velocity, time=time)
 
 
 def closing_kick(state: State, dt) -> State:
-    """Second half of a step: half kick with the freshly evaluated rates."""
+    """Second half of a step: half kick with the freshly evaluated accelerations."""
     free = ((state.kind == Kind.FLUID) | (state.kind == Kind.SOLID))[:, None]
-    half = 0.5 * dt
-    velocity = jnp.where(free, state.velocity + half * state.acceleration, state.velocity)
-    density = state.density + half * state.density_rate
-    return state.replace(velocity=velocity, density=density)
+    velocity = jnp.where(free, state.velocity + 0.5 * dt * state.acceleration, state.velocity)
+    return state.replace(velocity=velocity)
 
 
 def kick_drift_kick(state: State, neighbors: Neighbors, dt, model: Model, params: Params):
     """Advance one step of size ``dt``; returns ``(state, neighbors)``.
 
-    :func:`kick_drift`, a right-hand-side evaluation at the new positions, then
-    :func:`closing_kick` (shared with the diffrax solver ``sphjax.KickDriftKick``).
+    :func:`kick_drift`, a right-hand-side evaluation at the new positions that also
+    advances the continuity density by ``dt`` (``evaluate(..., density_step=dt)``), then
+    :func:`closing_kick` (both shared with the diffrax solver ``sphjax.KickDriftKick``).
     """
     state = kick_drift(state, dt, model)
     neighbors = _update_neighbors(state.position, neighbors, model)
-    state = evaluate(state, neighbors, model, params)
+    state = evaluate(state, neighbors, model, params, density_step=dt)
     return closing_kick(state, dt), neighbors
 
 
@@ -177,7 +181,10 @@ def _step_with_checks(carry, dt, model, params):
 
 def _run_steps(carry, n_steps: int, checkpoint_every: int | None, step_fn):
     """``n_steps`` steps; with ``checkpoint_every`` rematerialise steps and chunks."""
-    body = (lambda c, _: (step_fn(c), None))
+
+    def body(c, _):
+        return step_fn(c), None
+
     if checkpoint_every is None or n_steps <= 1:
         return jax.lax.scan(body, carry, None, length=n_steps)[0]
     body = jax.checkpoint(body)
@@ -194,8 +201,9 @@ def _run_steps(carry, n_steps: int, checkpoint_every: int | None, step_fn):
     return carry
 
 
-def _run_frames(state, neighbors, failure, step, dt, params, *, model, save_every, n_frames,
-                checkpoint_every):
+def _run_frames(
+    state, neighbors, failure, step, dt, params, *, model, save_every, n_frames, checkpoint_every
+):
     step_fn = functools.partial(_step_with_checks, dt=dt, model=model, params=params)
 
     def frame(carry, _):
@@ -234,7 +242,9 @@ def _raise_failure(failure, dt):
         raise SimulationError(
             f"simulation went unstable at step {step} (t = {step * float(dt):.6g}): particle "
             f"{particle} has a non-finite position/velocity or left the domain",
-            step=step, particle=particle, time=step * float(dt),
+            step=step,
+            particle=particle,
+            time=step * float(dt),
         )
 
 
@@ -293,14 +303,13 @@ def simulate(
     n_steps = int(n_steps)
     save_every = n_steps if save_every is None else int(save_every)
     if save_every < 1 or n_steps % save_every:
-        raise ValueError(
-            f"save_every={save_every} must be a positive divisor of n_steps={n_steps}"
-        )
+        raise ValueError(f"save_every={save_every} must be a positive divisor of n_steps={n_steps}")
     if checkpoint_every is not None and int(checkpoint_every) < 1:
         raise ValueError(f"checkpoint_every must be a positive integer, got {checkpoint_every}")
     n_frames = n_steps // save_every
     traced = _is_traced(params, state, dt)
     if not _is_traced(params, state) and not _is_traced(dt):
+        _check_finite(state)
         check_time_step(float(dt), state, model, params)
         _check_inside(state, model)
     dt = jnp.asarray(dt, state.position.dtype)
@@ -317,8 +326,16 @@ def simulate(
         neighbors = _update_neighbors(state.position, neighbors, model, rebuild=True)
         state = evaluate(state, neighbors, model, params)
         carry, frames = _run_frames(
-            state, neighbors, failure, step, dt, params, model=model, save_every=save_every,
-            n_frames=n_frames, checkpoint_every=checkpoint_every,
+            state,
+            neighbors,
+            failure,
+            step,
+            dt,
+            params,
+            model=model,
+            save_every=save_every,
+            n_frames=n_frames,
+            checkpoint_every=checkpoint_every,
         )
         jax.debug.callback(_raise_overflow, _overflowed(carry[1]))
         jax.debug.callback(_raise_failure, carry[2], dt)
@@ -327,8 +344,16 @@ def simulate(
         return Trajectory(states=states, times=times)
 
     state = jax.jit(evaluate, static_argnames="model")(state, neighbors, model, params)
-    if bool(jnp.any(~jnp.isfinite(state.acceleration))):
-        raise SimulationError("the initial state has non-finite accelerations", step=0)
+    bad = ~np.all(np.isfinite(np.asarray(state.acceleration)), axis=-1)
+    if bad.any():
+        particle = int(np.argmax(bad))
+        raise SimulationError(
+            f"the initial state has a non-finite acceleration at particle {particle} "
+            "(step 0); check the initial density, mass and spacing of the case",
+            step=0,
+            particle=particle,
+            time=0.0,
+        )
     all_frames = [_expand(state)]
     if on_frames is not None:
         on_frames(all_frames[0], jnp.zeros(1))
@@ -338,8 +363,16 @@ def simulate(
         k = min(frames_per_chunk, n_frames - done)
         for _attempt in range(10):
             carry, frames = _run_chunk(
-                state, neighbors, failure, step, dt, params, model=model,
-                save_every=save_every, n_frames=k, checkpoint_every=None,
+                state,
+                neighbors,
+                failure,
+                step,
+                dt,
+                params,
+                model=model,
+                save_every=save_every,
+                n_frames=k,
+                checkpoint_every=None,
             )
             if not bool(_overflowed(carry[1])):
                 break
@@ -358,7 +391,7 @@ def simulate(
         fail_step = int(carry[2][0])
         if fail_step >= 0:
             good = max(0, (fail_step - 1) // save_every - done)
-            kept = jax.tree_util.tree_map(lambda x: x[:good], frames)
+            kept = jax.tree_util.tree_map(operator.itemgetter(slice(good)), frames)
             if on_frames is not None and good:
                 on_frames(kept, frame_times[:good])
             _raise_failure(carry[2], dt)
@@ -371,6 +404,19 @@ def simulate(
             progress(k * save_every)
     times = jnp.arange(n_frames + 1) * (save_every * dt)
     return Trajectory(states=_stack(all_frames), times=times)
+
+
+def _check_finite(state: State) -> None:
+    """Reject an initial state with NaN/inf in its positions, velocities, densities or masses."""
+    for name in ("position", "velocity", "density", "mass"):
+        x = np.asarray(getattr(state, name))
+        bad = ~np.isfinite(x.reshape(x.shape[0], -1)).all(axis=-1)
+        if bad.any():
+            i = int(np.argmax(bad))
+            raise ValueError(
+                f"state.{name}: particle {i} has a non-finite value {x[i].tolist()}; "
+                f"every initial {name} must be a finite number"
+            )
 
 
 def _check_inside(state: State, model: Model) -> None:

@@ -16,6 +16,7 @@ Solids use their reference-configuration neighbours, found once (eq. 15-16).
 from __future__ import annotations
 
 import dataclasses
+import functools
 
 import jax
 import jax.numpy as jnp
@@ -24,7 +25,7 @@ from jax_md import partition
 from jax_md import space as jmd_space
 
 from sphjax import kernels
-from sphjax.space import displacement_fn, safe_norm
+from sphjax.space import safe_norm
 from sphjax.state import Model
 
 
@@ -78,6 +79,9 @@ def pair_geometry(position_a, position_b, idx, displacement, model: Model) -> Pa
     return Pairs(j=j, mask=mask, dr=dr, r=r, w=w, grad_w=grad_w)
 
 
+_CELL_LIST_FNS: dict = {}
+
+
 @dataclasses.dataclass(frozen=True)
 class NeighborSearch:
     """jax-md cell-list neighbour search for a Model (built once, outside ``jit``).
@@ -119,6 +123,7 @@ class NeighborSearch:
         box = self.box.astype(position.dtype)
         return jnp.mod(shifted, box)
 
+    @functools.cache  # noqa: B019 (one NeighborSearch per Model, cached in integrate)
     def _functions(self, dr_threshold: float):
         displacement, _ = jmd_space.periodic(self.box)
         return partition.neighbor_list(
@@ -133,7 +138,13 @@ class NeighborSearch:
     def allocate(self, position, extra_capacity: int = 0):
         """A new neighbour list for concrete ``position`` (outside ``jit``)."""
         fns = self._functions(self.skin)
-        return fns.allocate(self.to_box(jnp.asarray(position)), extra_capacity=extra_capacity)
+        neighbors = fns.allocate(self.to_box(jnp.asarray(position)), extra_capacity=extra_capacity)
+        # The update and cell-list functions are static (pytree metadata) in the list: new
+        # function objects at every allocation would make every jitted step recompile.
+        # ``_functions`` is cached; jax-md makes a new cell-list function object at each
+        # allocation, so keep the first one (same box, cell size and multiplier).
+        cell_list_fn = _CELL_LIST_FNS.setdefault(self, neighbors.cell_list_fn)
+        return neighbors.set(cell_list_fn=cell_list_fn)
 
     def update(self, position, neighbors):
         """Update inside ``jit``: rebuilt only if a particle moved more than half the skin."""
@@ -173,9 +184,9 @@ def reference_neighbors(reference_position, members, model: Model) -> np.ndarray
     buckets: dict[tuple, list[int]] = {}
     for k, c in enumerate(map(tuple, cell)):
         buckets.setdefault(c, []).append(k)
-    offsets = np.array(np.meshgrid(*[[-1, 0, 1]] * X.shape[1], indexing="ij")).reshape(
-        X.shape[1], -1
-    ).T
+    offsets = (
+        np.array(np.meshgrid(*[[-1, 0, 1]] * X.shape[1], indexing="ij")).reshape(X.shape[1], -1).T
+    )
     lists = []
     for k, c in enumerate(cell):
         cand = []

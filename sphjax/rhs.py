@@ -18,7 +18,7 @@ from sphjax.boundary.wall import wall_pressure, wall_velocity
 from sphjax.fluid.density import continuity_density_rate, summation_density
 from sphjax.fluid.density_diffusion import molteni_density_diffusion
 from sphjax.fluid.eos import tait_density, tait_pressure
-from sphjax.fluid.momentum import pressure_acceleration
+from sphjax.fluid.momentum import pressure_acceleration, transport_stress_acceleration
 from sphjax.fluid.viscosity import monaghan_pi, morris_acceleration
 from sphjax.neighbors import pair_geometry
 from sphjax.space import displacement_fn
@@ -51,14 +51,25 @@ def has_kind(model: Model, kind: Kind) -> bool:
     return int(kind) in tuple(int(k) for k in model.particle_kinds)
 
 
-def evaluate(state: State, neighbors: Neighbors, model: Model, params: Params) -> State:
-    """Rates of change of ``state`` (eqs. 5, 10-12 for fluids; 14-19 for solids)."""
+def evaluate(
+    state: State, neighbors: Neighbors, model: Model, params: Params, density_step=None
+) -> State:
+    """Rates of change of ``state`` (eqs. 5, 10-12 for fluids; 14-19 for solids).
+
+    ``density_step``: with continuity density (eq. 11), first advance the density by
+    ``density_step * Drho/Dt`` evaluated at the given positions and velocities, then
+    compute pressure and accelerations from the new density.  The integrator passes
+    ``dt`` here, which staggers density and velocity in time (density at whole steps,
+    velocity at half steps), the stable leapfrog for the acoustic system.  ``None``
+    evaluates the plain rates (the ODE right-hand side).
+    """
     acceleration = jnp.zeros_like(state.position)
     density_rate = jnp.zeros_like(state.density)
     density, pressure = state.density, state.pressure
+    shift_acceleration = state.shift_acceleration
     if has_kind(model, Kind.FLUID):
-        fluid = fluid_rates(state, neighbors.fluid.idx, model, params)
-        acceleration, density_rate, density, pressure = fluid
+        fluid = fluid_rates(state, neighbors.fluid.idx, model, params, density_step)
+        acceleration, density_rate, density, pressure, shift_acceleration = fluid
     if has_kind(model, Kind.SOLID):
         from sphjax.solid.rhs import solid_acceleration
 
@@ -71,11 +82,14 @@ def evaluate(state: State, neighbors: Neighbors, model: Model, params: Params) -
         density_rate=density_rate,
         density=density,
         pressure=pressure,
+        shift_acceleration=shift_acceleration,
     )
 
 
-def fluid_rates(state: State, idx, model: Model, params: Params):
-    """Fluid (and wall) rates: returns ``(acceleration, density_rate, density, pressure)``.
+def fluid_rates(state: State, idx, model: Model, params: Params, density_step=None):
+    """Fluid (and wall) rates.
+
+    Returns ``(acceleration, density_rate, density, pressure, shift_acceleration)``.
 
     Rows of non-fluid particles are zero in ``acceleration`` and ``density_rate``; wall
     rows of ``density`` and ``pressure`` hold the Adami extrapolation.
@@ -95,12 +109,25 @@ def fluid_rates(state: State, idx, model: Model, params: Params):
     p0, p_bg = params.reference_pressure, params.background_pressure
     mass = state.mass
     density = state.density
+    velocity = state.velocity
+    density_rate = jnp.zeros_like(density)
     if model.density == "summation":
         self_weight = kernels.W(model.kernel, 0.0, h, dim)
         density = jnp.where(is_fluid, summation_density(mass, pairs_hydro, self_weight), density)
+    else:
+        density_rate = continuity_density_rate(mass, velocity, pairs_hydro)
+        if model.density_diffusion is not None:
+            j = pairs.j
+            hydrostatic = rho0 * jnp.sum(params.gravity * pairs.dr, axis=-1) / c0**2
+            volume_b = mass[j] / density[j]
+            density_rate = density_rate + molteni_density_diffusion(
+                density, volume_b, pairs_fluid, hydrostatic, params.density_diffusion, h, c0
+            )
+        density_rate = jnp.where(is_fluid, density_rate, 0.0)
+        if density_step is not None:
+            density = density + density_step * density_rate
     pressure = tait_pressure(density, rho0, c0, gamma, p0, p_bg)
 
-    velocity = state.velocity
     viscous_velocity = velocity
     if with_walls:
         # Adami et al. (2012): wall pressure from the fluid, fixed walls (a_w = 0).
@@ -121,8 +148,14 @@ def fluid_rates(state: State, idx, model: Model, params: Params):
     pi_ab = 0.0
     if model.artificial_viscosity:
         pi_ab = monaghan_pi(
-            v_ab, pairs, density[:, None], density[j], c0, h,
-            params.artificial_alpha, params.artificial_beta,
+            v_ab,
+            pairs,
+            density[:, None],
+            density[j],
+            c0,
+            h,
+            params.artificial_alpha,
+            params.artificial_beta,
         )
         pi_ab = jnp.where(pairs_viscous.mask, pi_ab, 0.0)
     acceleration = pressure_acceleration(mass, density, pressure, pairs_hydro, pi_ab)
@@ -135,16 +168,20 @@ def fluid_rates(state: State, idx, model: Model, params: Params):
         )
     acceleration = acceleration + params.gravity
 
-    density_rate = jnp.zeros_like(density)
-    if model.density == "continuity":
-        density_rate = continuity_density_rate(mass, velocity, pairs_hydro)
-        if model.density_diffusion is not None:
-            hydrostatic = rho0 * jnp.sum(params.gravity * pairs.dr, axis=-1) / c0**2
-            volume_b = mass[j] / density[j]
-            density_rate = density_rate + molteni_density_diffusion(
-                density, volume_b, pairs_fluid, hydrostatic, params.density_diffusion, h, c0
+    shift = jnp.zeros_like(acceleration)
+    if model.transport_velocity:
+        # Adami et al. (2013): eq. 10 with the uniform background pressure p_b ...
+        p_b = jnp.broadcast_to(params.transport_pressure, pressure.shape)
+        shift = pressure_acceleration(mass, density, p_b, pairs_hydro, 0.0)
+        if density_step is not None:
+            # ... and the momentum flux A = rho v (v~ - v)^T of the transport velocity
+            # v~ - v = dt/2 a_b of the drift just taken.
+            delta_v = 0.5 * density_step * state.shift_acceleration
+            acceleration = acceleration + transport_stress_acceleration(
+                mass, density, velocity, delta_v, pairs_fluid
             )
 
     acceleration = jnp.where(is_fluid[:, None], acceleration, 0.0)
     density_rate = jnp.where(is_fluid, density_rate, 0.0)
-    return acceleration, density_rate, density, pressure
+    shift = jnp.where(is_fluid[:, None], shift, 0.0)
+    return acceleration, density_rate, density, pressure, shift

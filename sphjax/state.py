@@ -65,6 +65,8 @@ class State:
         kept so the kick-drift-kick integrator evaluates forces once per step.
       density_rate: ``[N]`` ``Drho/Dt`` from the last evaluation (continuity, eq. 11).
       pressure: ``[N]`` pressure from the last evaluation (fluid and wall particles).
+      shift_acceleration: ``[N, d]`` background-pressure acceleration of the transport
+        velocity (Adami, Hu & Adams 2013); zero unless ``Model.transport_velocity``.
       time: scalar simulated time.
     """
 
@@ -78,6 +80,7 @@ class State:
     acceleration: Array
     density_rate: Array
     pressure: Array
+    shift_acceleration: Array
     time: Array
 
     @property
@@ -98,7 +101,9 @@ def make_state(position, velocity, density, mass, kind, volume=None) -> State:
     density = jnp.broadcast_to(jnp.asarray(density, dtype), (n,))
     mass = jnp.broadcast_to(jnp.asarray(mass, dtype), (n,))
     kind = jnp.broadcast_to(jnp.asarray(kind, jnp.int32), (n,))
-    volume = mass / density if volume is None else jnp.broadcast_to(jnp.asarray(volume, dtype), (n,))
+    volume = (
+        mass / density if volume is None else jnp.broadcast_to(jnp.asarray(volume, dtype), (n,))
+    )
     return State(
         position=position,
         velocity=velocity,
@@ -110,6 +115,7 @@ def make_state(position, velocity, density, mass, kind, volume=None) -> State:
         acceleration=jnp.zeros((n, d), dtype),
         density_rate=jnp.zeros((n,), dtype),
         pressure=jnp.zeros((n,), dtype),
+        shift_acceleration=jnp.zeros((n, d), dtype),
         time=jnp.zeros((), dtype),
     )
 
@@ -127,6 +133,8 @@ class Params:
       artificial_beta: Monaghan ``beta`` (quadratic term).
       kinematic_viscosity: physical kinematic viscosity ``nu`` (Morris et al. 1997).
       background_pressure: ``p_background`` subtracted in eq. 12.
+      transport_pressure: background pressure ``p_b`` of the transport-velocity
+        formulation (Adami, Hu & Adams 2013); used when ``Model.transport_velocity``.
       reference_pressure: ``p0`` added in eq. 12.
       density_diffusion: delta-SPH coefficient ``delta`` (used when the Model enables it).
       young_modulus: solid Young's modulus ``E`` (eq. 19).
@@ -142,6 +150,7 @@ class Params:
     artificial_beta: Array
     kinematic_viscosity: Array
     background_pressure: Array
+    transport_pressure: Array
     reference_pressure: Array
     density_diffusion: Array
     young_modulus: Array
@@ -160,6 +169,7 @@ def make_params(
     artificial_beta=0.0,
     kinematic_viscosity=0.0,
     background_pressure=0.0,
+    transport_pressure=0.0,
     reference_pressure=0.0,
     density_diffusion=0.1,
     young_modulus=1.0e6,
@@ -179,6 +189,7 @@ def make_params(
         artificial_beta=artificial_beta,
         kinematic_viscosity=kinematic_viscosity,
         background_pressure=background_pressure,
+        transport_pressure=transport_pressure,
         reference_pressure=reference_pressure,
         density_diffusion=density_diffusion,
         young_modulus=young_modulus,
@@ -237,6 +248,10 @@ class Model:
         for internal flows.
       artificial_viscosity: include Monaghan's ``Pi_ab`` (eq. 10).
       physical_viscosity: include the Morris laminar viscosity (kinematic ``nu``).
+      transport_velocity: advect fluid particles with the transport velocity of Adami,
+        Hu & Adams (2013), ``v~ = v + dt/2 a_b`` with the background-pressure acceleration
+        ``a_b`` (pressure ``Params.transport_pressure``), which keeps the particle
+        distribution regular (needed for Taylor-Green).
       density_diffusion: ``None`` or ``"molteni"`` / ``"antuono"`` (delta-SPH).
       wall_slip: ``"no_slip"`` or ``"free_slip"`` for the Adami wall viscous term.
       solid_penalty: include the hourglass penalty force of eq. 14.
@@ -258,6 +273,7 @@ class Model:
     gamma: float = 7.0
     artificial_viscosity: bool = True
     physical_viscosity: bool = False
+    transport_velocity: bool = False
     density_diffusion: str | None = None
     wall_slip: str = "no_slip"
     solid_penalty: bool = False

@@ -24,17 +24,23 @@ from sphjax._solver.term import Phase, SPHTerm
 from sphjax.integrate import closing_kick, kick_drift
 
 
-def _model_of(terms):
-    """The static Model of our term (diffrax wraps terms, e.g. in ``WrapTerm``)."""
+def _term_of(terms) -> SPHTerm:
+    """Our term inside diffrax's wrappers (e.g. ``WrapTerm``)."""
     while not isinstance(terms, SPHTerm):
         terms = terms.term
-    return terms.model
+    return terms
+
+
+def _model_of(terms):
+    """The static Model of our term."""
+    return _term_of(terms).model
 
 
 class KickDriftKick(diffrax.AbstractSolver):
     """Kick-drift-kick for an :class:`~sphjax.diffrax_solver.SPHTerm`.
 
-    Solver state: ``(acceleration [N, d], density_rate [N])`` of the last evaluation.
+    Solver state: ``(acceleration [N, d], density_rate [N], shift_acceleration [N, d])`` of
+    the last evaluation.
     """
 
     term_structure: ClassVar = SPHTerm
@@ -47,11 +53,11 @@ class KickDriftKick(diffrax.AbstractSolver):
 
     def init(self, terms, t0, t1, y0, args):
         rates = terms.vf(t0, y0, args)
-        return rates.acceleration, rates.density_rate
+        return rates.acceleration, rates.density_rate, rates.shift_acceleration
 
     def step(self, terms, t0, t1, y0, args, solver_state, made_jump):
         del made_jump  # the right-hand side has no jumps
-        acceleration, density_rate = solver_state
+        acceleration, density_rate, shift_acceleration = solver_state
         dt = t1 - t0
         state = args.state.replace(
             position=y0.position,
@@ -59,11 +65,14 @@ class KickDriftKick(diffrax.AbstractSolver):
             density=y0.density,
             acceleration=acceleration,
             density_rate=density_rate,
+            shift_acceleration=shift_acceleration,
             time=jnp.asarray(t0, y0.position.dtype),
         )
         state = kick_drift(state, dt, _model_of(terms))
         half_step = Phase(state.position, state.velocity, state.density)
-        rates = terms.vf(t1, half_step, args)
+        rates = _term_of(terms).rates(
+            t1, half_step, args, density_step=dt, shift_acceleration=shift_acceleration
+        )
         state = closing_kick(
             state.replace(
                 density=rates.density,
@@ -78,7 +87,7 @@ class KickDriftKick(diffrax.AbstractSolver):
             y1,
             None,
             dense_info,
-            (rates.acceleration, rates.density_rate),
+            (rates.acceleration, rates.density_rate, rates.shift_acceleration),
             (diffrax.RESULTS.successful),
         )
 

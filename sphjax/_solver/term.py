@@ -27,13 +27,15 @@ class Phase:
 
 @dataclasses.dataclass(frozen=True)
 class Rates:
-    """Vector-field output: ``velocity``, ``acceleration``, ``density_rate`` and the
-    evaluated (summation / wall) ``density``, each per particle."""
+    """Vector-field output: ``velocity``, ``acceleration``, ``density_rate``, the
+    evaluated density (summation / wall / advanced continuity) and the transport-velocity
+    ``shift_acceleration``, each per particle."""
 
     velocity: Array
     acceleration: Array
     density_rate: Array
     density: Array
+    shift_acceleration: Array
 
 
 @dataclasses.dataclass(frozen=True)
@@ -47,7 +49,7 @@ class SPHArgs:
 
 for _cls, _fields in (
     (Phase, ["position", "velocity", "density"]),
-    (Rates, ["velocity", "acceleration", "density_rate", "density"]),
+    (Rates, ["velocity", "acceleration", "density_rate", "density", "shift_acceleration"]),
     (SPHArgs, ["params", "state", "neighbors"]),
 ):
     jax.tree_util.register_dataclass(_cls, data_fields=_fields, meta_fields=[])
@@ -65,25 +67,34 @@ class SPHTerm(diffrax.AbstractTerm):
     model: Model = eqx.field(static=True)
 
     def vf(self, t, y: Phase, args: SPHArgs) -> Rates:
+        return self.rates(t, y, args)
+
+    def rates(self, t, y: Phase, args: SPHArgs, density_step=None, shift_acceleration=None):
+        """The right-hand side; with ``density_step`` the continuity density is first
+        advanced by that step (see :func:`sphjax.evaluate`), as the KDK solver needs."""
         state = args.state.replace(
             position=y.position,
             velocity=y.velocity,
             density=y.density,
             time=jnp.asarray(t, y.position.dtype),
         )
+        if shift_acceleration is not None:
+            state = state.replace(shift_acceleration=shift_acceleration)
         neighbors = args.neighbors
         if neighbors.fluid is not None:
             fluid = _search(self.model).rebuild(y.position, neighbors.fluid)
             overflow = jnp.asarray(fluid.did_buffer_overflow)
             neighbors = dataclasses.replace(neighbors, fluid=fluid)
-        state = evaluate(state, neighbors, self.model, args.params)
+        state = evaluate(state, neighbors, self.model, args.params, density_step)
         velocity = state.velocity
         if self.model.clamped_motion is None:  # clamped particles stay put
             velocity = jnp.where((state.kind == Kind.CLAMPED)[:, None], 0.0, velocity)
         acceleration = state.acceleration
         if neighbors.fluid is not None:
             acceleration = eqx.error_if(acceleration, overflow, _OVERFLOW_MESSAGE)
-        return Rates(velocity, acceleration, state.density_rate, state.density)
+        return Rates(
+            velocity, acceleration, state.density_rate, state.density, state.shift_acceleration
+        )
 
     def contr(self, t0, t1, **kwargs):
         return t1 - t0

@@ -7,6 +7,9 @@ differentiable Params, a stable time step and a default end time).
 
 from __future__ import annotations
 
+import inspect
+
+from sphjax.cases._resolution import n_for_spacing
 from sphjax.cases.fluid import (
     dam_break,
     hydrostatic_tank,
@@ -33,12 +36,29 @@ CASES = {
 }
 
 
-def get(name: str, **kwargs):
-    """Build the case called ``name`` (see ``CASES``) with keyword arguments."""
+def get(name: str, *, dx: float | None = None, **kwargs):
+    """Build the case called ``name`` (see ``CASES``) with keyword arguments.
+
+    ``dx`` gives the resolution as a particle spacing instead of ``n`` (``n = L / dx``
+    rounded, ``L`` the case's length scale; see ``case.info["dx"]`` for the one used).
+    """
     try:
         factory = CASES[name]
     except KeyError:
-        raise ValueError(f"unknown case {name!r}; available cases: {', '.join(sorted(CASES))}") from None
+        raise ValueError(
+            f"unknown case {name!r}; available cases: {', '.join(sorted(CASES))}"
+        ) from None
+    accepted = inspect.signature(factory).parameters
+    unknown = sorted(set(kwargs) - set(accepted))
+    if unknown:
+        raise ValueError(
+            f"case {name!r} has no argument {', '.join(map(repr, unknown))}; "
+            f"it accepts {', '.join(accepted)}"
+        )
+    if dx is not None:
+        if "n" in kwargs:
+            raise ValueError("give either n or dx, not both")
+        kwargs["n"] = n_for_spacing(factory, dx, **kwargs)
     return factory(**kwargs)
 
 

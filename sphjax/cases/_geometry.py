@@ -41,13 +41,24 @@ def box_walls(inner_lower, inner_upper, dx, layers, open_top=False) -> np.ndarra
 
 
 def check_positive(name: str, value) -> float:
-    value = float(value)
-    if not value > 0 or not math.isfinite(value):
-        raise ValueError(f"{name} must be a positive number, got {value}")
-    return value
+    """``value`` as a float; a ValueError naming ``name`` unless it is finite and > 0."""
+    try:
+        number = float(value)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name} must be a positive number, got {value!r}") from None
+    if not number > 0 or not math.isfinite(number):
+        raise ValueError(f"{name} must be a positive number, got {value!r}")
+    return number
 
 
 def check_resolution(name: str, value, minimum: int = 2) -> int:
-    if int(value) != value or int(value) < minimum:
-        raise ValueError(f"{name} must be an integer >= {minimum}, got {value}")
+    """``value`` as an int; a ValueError naming ``name`` unless it is an integer >= minimum."""
+    try:
+        ok = int(value) == value and int(value) >= minimum
+    except (TypeError, ValueError, OverflowError):
+        ok = False
+    if not ok:
+        raise ValueError(
+            f"{name} must be an integer >= {minimum} (particles across the case), got {value!r}"
+        )
     return int(value)

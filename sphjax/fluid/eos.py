@@ -5,8 +5,9 @@ from __future__ import annotations
 import jax.numpy as jnp
 
 
-def tait_pressure(density, reference_density, sound_speed, gamma, reference_pressure=0.0,
-                  background_pressure=0.0):
+def tait_pressure(
+    density, reference_density, sound_speed, gamma, reference_pressure=0.0, background_pressure=0.0
+):
     """Pressure from density, eq. 12.
 
     ``p = rho0 c^2 / gamma ((rho / rho0)^gamma - 1) + p0 - p_background``.
@@ -18,8 +19,9 @@ def tait_pressure(density, reference_density, sound_speed, gamma, reference_pres
     )
 
 
-def tait_density(pressure, reference_density, sound_speed, gamma, reference_pressure=0.0,
-                 background_pressure=0.0):
+def tait_density(
+    pressure, reference_density, sound_speed, gamma, reference_pressure=0.0, background_pressure=0.0
+):
     """Density from pressure: the inverse of eq. 12 (used for wall particles and set-up).
 
     The base of the power is clipped at a small positive number so that a strongly

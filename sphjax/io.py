@@ -1,0 +1,355 @@
+"""HDF5 trajectories: write frames as a run goes, read them back to the same pytree.
+
+File layout (one file per run, h5py)::
+
+    /times                    [T]            simulated time of each frame
+    /states/<field>           [T, ...]       one dataset per State field (position, ...)
+    /params                   (group)        one attribute per Params field
+    /  attributes             format, format_version, sphjax_version, case, dt,
+                              model (JSON), case_info (JSON), complete, error, ...
+
+Every dataset has an unlimited, chunked leading time axis (one chunk per frame).
+:class:`TrajectoryWriter` is an ``on_frames`` callback for :func:`sphjax.simulate`: it
+appends each block of frames and flushes the file, so a run that is killed or goes
+unstable keeps every frame already written.  ``complete`` becomes true only when the
+writer is closed after a run that raised nothing.
+
+    with sphjax.io.TrajectoryWriter("run.h5", case) as writer:
+        sphjax.simulate(case, t_end=0.1, save_every=10, on_frames=writer)
+    trajectory, metadata = sphjax.io.read_trajectory("run.h5")
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import math
+import os
+import warnings
+from pathlib import Path
+from typing import Any
+
+import h5py
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from sphjax.case import Case
+from sphjax.integrate import Trajectory
+from sphjax.kernels import KERNELS
+from sphjax.state import Params, State
+
+FORMAT = "sphjax-trajectory"
+FORMAT_VERSION = 1
+STATE_FIELDS = tuple(f.name for f in dataclasses.fields(State))
+PARAMS_FIELDS = tuple(f.name for f in dataclasses.fields(Params))
+
+
+# ---------------------------------------------------------------------------- output path
+
+
+def check_writable(path, argument: str = "path") -> Path:
+    """Raise a ValueError naming ``argument`` if a file cannot be written at ``path``.
+
+    Call this before a run starts, so a long simulation never ends in an unwritable path.
+    Returns ``path`` as a :class:`~pathlib.Path`.
+    """
+    if path is None or str(path) == "":
+        raise ValueError(f"{argument}: an output file name is required, e.g. run.h5")
+    path = Path(path)
+    parent = path.parent if str(path.parent) else Path(".")
+    if path.is_dir():
+        raise ValueError(
+            f"{argument}: '{path}' is a directory; give a file name inside it, "
+            f"e.g. '{path / 'run.h5'}'"
+        )
+    if not parent.exists():
+        raise ValueError(
+            f"{argument}: cannot write '{path}': directory '{parent}' does not exist; "
+            f"create it first (mkdir -p '{parent}') or choose another path"
+        )
+    if not parent.is_dir():
+        raise ValueError(f"{argument}: cannot write '{path}': '{parent}' is not a directory")
+    if not os.access(parent, os.W_OK | os.X_OK):
+        raise ValueError(
+            f"{argument}: cannot write '{path}': directory '{parent}' is not writable; "
+            "choose a path in a directory you can write to"
+        )
+    if path.exists() and not os.access(path, os.W_OK):
+        raise ValueError(
+            f"{argument}: cannot overwrite '{path}': the file is read-only; "
+            "remove it, change its permissions or choose another path"
+        )
+    return path
+
+
+# ---------------------------------------------------------------------------- metadata
+
+
+def _jsonable(value):
+    """Best-effort conversion of Model/Case values to JSON types."""
+    if value is None or isinstance(value, bool | int | str):
+        return value
+    if isinstance(value, float | np.floating):
+        value = float(value)
+        return value if math.isfinite(value) else str(value)
+    if isinstance(value, np.integer):
+        return int(value)
+    if isinstance(value, np.ndarray | jax.Array):
+        return _jsonable(np.asarray(value).tolist())
+    if isinstance(value, list | tuple):
+        return [_jsonable(v) for v in value]
+    if isinstance(value, dict):
+        return {str(k): _jsonable(v) for k, v in value.items()}
+    if dataclasses.is_dataclass(value) and not isinstance(value, type):
+        return {f.name: _jsonable(getattr(value, f.name)) for f in dataclasses.fields(value)}
+    return repr(value)
+
+
+def _kernel_name(kernel) -> str:
+    for name, cls in KERNELS.items():
+        if type(kernel) is cls:
+            return name
+    return type(kernel).__name__
+
+
+def model_to_dict(model) -> dict[str, Any]:
+    """The fields of a Model as JSON-ready values (kernel by name, domain as a dict)."""
+    out = {}
+    for f in dataclasses.fields(model):
+        value = getattr(model, f.name)
+        if f.name == "kernel":
+            out["kernel"] = _kernel_name(value)
+        elif f.name == "clamped_motion":
+            out[f.name] = None if value is None else getattr(value, "__qualname__", repr(value))
+        else:
+            out[f.name] = _jsonable(value)
+    return out
+
+
+# ---------------------------------------------------------------------------- writer
+
+
+class TrajectoryWriter:
+    """Append frames of a run to an HDF5 file; usable as ``simulate(..., on_frames=writer)``.
+
+    The file is created (or truncated) when the writer is made, so an unwritable path
+    fails before the run starts.  Each call appends a block of frames and flushes.
+
+    Args:
+      path: the ``.h5`` file to write.
+      case: the :class:`~sphjax.Case` being run (its name, Model, Params, dt, info are
+        stored as attributes).  May be None for frames of unknown origin.
+      params: the Params actually used (default ``case.params``).
+      dt: the time step actually used (default ``case.dt``).
+      attrs: extra attributes (JSON-able values) to store on the file.
+      argument: the name to use for ``path`` in error messages (e.g. ``"--out"``).
+    """
+
+    def __init__(
+        self,
+        path,
+        case: Case | None = None,
+        *,
+        params: Params | None = None,
+        dt: float | None = None,
+        attrs: dict[str, Any] | None = None,
+        argument: str = "path",
+    ):
+        self.path = check_writable(path, argument)
+        try:
+            self._file = h5py.File(self.path, "w")
+        except OSError as err:
+            raise ValueError(f"{argument}: cannot create '{self.path}': {err}") from None
+        self.n_frames = 0
+        a = self._file.attrs
+        from sphjax import __version__
+
+        a["format"] = FORMAT
+        a["format_version"] = FORMAT_VERSION
+        a["sphjax_version"] = __version__
+        a["complete"] = False
+        a["error"] = ""
+        if case is not None:
+            params = case.params if params is None else params
+            dt = case.dt if dt is None else dt
+            a["case"] = case.name
+            a["model"] = json.dumps(model_to_dict(case.model))
+            a["case_info"] = json.dumps(_jsonable(case.info))
+            a["n_particles"] = case.n_particles
+        if dt is not None:
+            a["dt"] = float(dt)
+        if params is not None:
+            group = self._file.create_group("params")
+            for name in PARAMS_FIELDS:
+                group.attrs[name] = np.asarray(getattr(params, name))
+        for key, value in (attrs or {}).items():
+            a[key] = json.dumps(_jsonable(value))
+        self._file.flush()
+
+    # on_frames protocol
+    def __call__(self, states: State, times) -> None:
+        self.append(states, times)
+
+    def append(self, states: State, times) -> None:
+        """Append frames: ``states`` with a leading frame axis, ``times`` of shape ``[k]``."""
+        if self._file is None:
+            raise RuntimeError(f"TrajectoryWriter for '{self.path}' is already closed")
+        times = np.asarray(times)
+        k = int(times.shape[0])
+        if k == 0:
+            return
+        arrays = {name: np.asarray(getattr(states, name)) for name in STATE_FIELDS}
+        for name, x in arrays.items():
+            if x.shape[:1] != (k,):
+                raise ValueError(f"states.{name} has {x.shape[:1]} frames but times has {k}")
+        group = self._file.require_group("states")
+        if self.n_frames == 0:
+            for name, x in arrays.items():
+                group.create_dataset(
+                    name, shape=(0, *x.shape[1:]), maxshape=(None, *x.shape[1:]),
+                    dtype=x.dtype, chunks=(1, *x.shape[1:]) if x.ndim > 1 else (256,),
+                )  # fmt: skip
+            self._file.create_dataset(
+                "times", shape=(0,), maxshape=(None,), dtype=times.dtype, chunks=(256,)
+            )
+        end = self.n_frames + k
+        for name, x in arrays.items():
+            dataset = group[name]
+            if dataset.shape[1:] != x.shape[1:]:
+                raise ValueError(
+                    f"states.{name} has per-frame shape {x.shape[1:]}, but the file holds "
+                    f"frames of shape {dataset.shape[1:]}"
+                )
+            dataset.resize(end, axis=0)
+            dataset[self.n_frames :] = x
+        self._file["times"].resize((end,))
+        self._file["times"][self.n_frames :] = times
+        self.n_frames = end
+        self._file.attrs["n_frames"] = end
+        self._file.flush()
+
+    def set_error(self, message: str) -> None:
+        """Record why a run stopped (kept in the ``error`` attribute)."""
+        if self._file is not None:
+            self._file.attrs["error"] = str(message)
+            self._file.flush()
+
+    def close(self, complete: bool = True) -> None:
+        if self._file is None:
+            return
+        self._file.attrs["complete"] = bool(complete and not self._file.attrs["error"])
+        self._file.close()
+        self._file = None
+
+    def __enter__(self) -> TrajectoryWriter:
+        return self
+
+    def __exit__(self, exc_type, exc, tb) -> None:
+        if exc is not None:
+            self.set_error(f"{exc_type.__name__}: {exc}")
+        self.close(complete=exc is None)
+
+
+def write_trajectory(path, trajectory: Trajectory, case: Case | None = None, **kwargs) -> Path:
+    """Write a whole :class:`~sphjax.Trajectory` at once (see :class:`TrajectoryWriter`)."""
+    with TrajectoryWriter(path, case, **kwargs) as writer:
+        writer.append(trajectory.states, trajectory.times)
+    return writer.path
+
+
+# ---------------------------------------------------------------------------- reader
+
+
+def _decode(value):
+    if isinstance(value, bytes):
+        value = value.decode()
+    if isinstance(value, np.generic):
+        return value.item()
+    return value
+
+
+def read_metadata(path) -> dict[str, Any]:
+    """The attributes of a trajectory file as Python values (no frames are read)."""
+    with _open(path) as f:
+        return _metadata(f)
+
+
+def _open(path):
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"no trajectory file at '{path}'")
+    try:
+        f = h5py.File(path, "r")
+    except OSError as err:
+        raise ValueError(f"'{path}' is not a readable HDF5 file: {err}") from None
+    if _decode(f.attrs.get("format")) != FORMAT:
+        f.close()
+        raise ValueError(f"'{path}' is not an sphjax trajectory (no format='{FORMAT}' attribute)")
+    return f
+
+
+_PLAIN_ATTRS = {"format", "sphjax_version", "case", "error"}
+
+
+def _metadata(f) -> dict[str, Any]:
+    meta = {key: _decode(value) for key, value in f.attrs.items()}
+    for key, value in meta.items():  # model, case_info and extra attrs are stored as JSON
+        if isinstance(value, str) and key not in _PLAIN_ATTRS:
+            meta[key] = json.loads(value)
+    meta["complete"] = bool(meta.get("complete", False))
+    meta["n_frames"] = int(f["times"].shape[0]) if "times" in f else 0
+    if "params" in f:
+        meta["params"] = Params(
+            **{name: jnp.asarray(f["params"].attrs[name]) for name in PARAMS_FIELDS}
+        )
+    return meta
+
+
+def read_trajectory(path, frames=None) -> tuple[Trajectory, dict[str, Any]]:
+    """Read a trajectory file written by :class:`TrajectoryWriter`.
+
+    Args:
+      path: the ``.h5`` file.
+      frames: optional index or slice of frames to read (default: all); an index keeps
+        the leading time axis (one frame).
+    Returns:
+      ``(trajectory, metadata)``: a :class:`~sphjax.Trajectory` with the stored dtypes and
+      a dict of the file attributes (``case``, ``dt``, ``sphjax_version``, ``model`` and
+      ``case_info`` as dicts, ``params`` as :class:`~sphjax.Params`, ``complete``,
+      ``error``, ``n_frames``).
+    """
+    with _open(path) as f:
+        meta = _metadata(f)
+        if "states" not in f:
+            raise ValueError(f"'{path}' holds no frames (the run stopped before the first one)")
+        n = int(f["times"].shape[0])
+        if frames is None:
+            select = slice(None)
+        elif isinstance(frames, slice):
+            select = frames
+        else:
+            i = int(frames)
+            if not -n <= i < n:
+                raise IndexError(f"frame {i} out of range: '{path}' holds {n} frames")
+            select = slice(i % n, i % n + 1)
+        arrays = {name: f["states"][name][select] for name in STATE_FIELDS}
+        times = f["times"][select]
+    if any(x.dtype == np.float64 for x in arrays.values()) and not jax.config.jax_enable_x64:
+        warnings.warn(
+            f"'{path}' holds float64 data but jax_enable_x64 is off, so it is read as "
+            "float32; enable it (jax.config.update('jax_enable_x64', True)) for an exact read",
+            stacklevel=2,
+        )
+    states = State(**{name: jnp.asarray(x) for name, x in arrays.items()})
+    return Trajectory(states=states, times=jnp.asarray(times)), meta
+
+
+__all__ = [
+    "TrajectoryWriter",
+    "check_writable",
+    "model_to_dict",
+    "read_metadata",
+    "read_trajectory",
+    "write_trajectory",
+]

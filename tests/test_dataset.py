@@ -1,0 +1,197 @@
+"""Ensemble datasets in the LagrangeBench layout (sphjax.dataset)."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import h5py
+import numpy as np
+import pytest
+from _tiny_dataset import KWARGS, N_SIDE, make, shared
+
+METADATA_KEYS = {
+    "case",
+    "solver",
+    "dim",
+    "dx",
+    "dt",
+    "write_every",
+    "t_end",
+    "sequence_length_train",
+    "sequence_length_test",
+    "num_trajs_train",
+    "num_trajs_test",
+    "num_particles_max",
+    "periodic_boundary_conditions",
+    "bounds",
+    "default_connectivity_radius",
+    "vel_mean",
+    "vel_std",
+    "acc_mean",
+    "acc_std",
+    "viscosity",
+    "artificial_alpha",
+    "g_ext_magnitude",
+    "p_bg_factor",
+    "density_evolution",
+}
+
+
+@pytest.fixture(scope="module")
+def dataset(tmp_path_factory):
+    return shared(tmp_path_factory)
+
+
+def _read(folder, split):
+    with h5py.File(Path(folder) / f"{split}.h5", "r") as f:
+        return {k: (f[k]["position"][()], f[k]["particle_type"][()], dict(f[k].attrs)) for k in f}
+
+
+def test_layout_shapes_dtypes_and_metadata(dataset):
+    assert sorted(p.name for p in dataset.iterdir()) == [
+        "metadata.json",
+        "test.h5",
+        "train.h5",
+        "valid.h5",
+    ]
+    meta = json.loads((dataset / "metadata.json").read_text())
+    assert METADATA_KEYS <= set(meta)
+    frames = KWARGS["steps"] // KWARGS["write_every"] + 1
+    n = N_SIDE**2
+    assert meta["sequence_length_train"] == frames and meta["num_particles_max"] == n
+    assert meta["periodic_boundary_conditions"] == [True, True]
+    assert meta["bounds"] == [[0.0, 1.0], [0.0, 1.0]]
+    assert meta["default_connectivity_radius"] == pytest.approx(1.45 / N_SIDE)
+    assert meta["t_end"] == pytest.approx(meta["dt"] * KWARGS["steps"])
+    for split, count in [("train", 3), ("valid", 1), ("test", 1)]:
+        groups = _read(dataset, split)
+        assert sorted(groups) == [f"{i:05d}" for i in range(count)]
+        for x, t, attrs in groups.values():
+            assert x.dtype == np.float32 and x.shape == (frames, n, 2)
+            assert np.issubdtype(t.dtype, np.integer) and t.shape == (n,)
+            assert np.all(t == 0) and np.all(np.isfinite(x))
+            assert np.all((x >= 0) & (x < 1))
+            assert 0.008 <= attrs["kinematic_viscosity"] <= 0.012
+    # trajectories differ (random initial velocities), the first frame does not
+    train = _read(dataset, "train")
+    assert not np.allclose(train["00000"][0][1], train["00001"][0][1])
+    np.testing.assert_array_equal(train["00000"][0][0], train["00001"][0][0])
+
+
+def test_statistics_recomputed_independently(dataset):
+    meta = json.loads((dataset / "metadata.json").read_text())
+    vel, acc = [], []
+    for x, t, _ in _read(dataset, "train").values():
+        x = x[:, t == 0].astype(np.float64)
+        v = np.diff(x, axis=0)
+        v = (v + 0.5) % 1.0 - 0.5  # minimum image in the unit box
+        vel.append(v.reshape(-1, 2))
+        acc.append(np.diff(v, axis=0).reshape(-1, 2))
+    vel, acc = np.concatenate(vel), np.concatenate(acc)
+    np.testing.assert_allclose(meta["vel_mean"], vel.mean(0), atol=1e-9)
+    np.testing.assert_allclose(meta["vel_std"], vel.std(0), rtol=1e-6)
+    np.testing.assert_allclose(meta["acc_mean"], acc.mean(0), atol=1e-9)
+    np.testing.assert_allclose(meta["acc_std"], acc.std(0), rtol=1e-6)
+    # per-frame displacements are small compared with the box: no wrap-around jumps left
+    assert np.abs(vel).max() < 0.1
+
+
+def test_interrupted_run_is_marked_and_resumes_to_the_same_data(dataset, tmp_path):
+    from sphjax.surrogate import data
+
+    out = tmp_path / "tg"
+    make(out, stop_after=1)  # one batch of two trajectories, then "interrupted"
+    assert (out / "INCOMPLETE").exists()
+    assert not (out / "metadata.json").exists() and not (out / "train.h5").exists()
+    with pytest.raises(ValueError, match="incomplete"):
+        data.load(out, "train")
+    with pytest.raises(FileExistsError, match="resume"):
+        make(out)
+    make(out, resume=True)
+    assert not (out / "INCOMPLETE").exists() and not (out / ".partial").exists()
+    for split in ("train", "valid", "test"):
+        a, b = _read(dataset, split), _read(out, split)
+        for k in a:
+            np.testing.assert_array_equal(a[k][0], b[k][0])
+    assert json.loads((out / "metadata.json").read_text()) == json.loads(
+        (dataset / "metadata.json").read_text()
+    )
+
+
+def test_bad_arguments_are_named():
+    import sphjax
+    from sphjax.dataset import generate_dataset
+
+    case = sphjax.cases.taylor_green(n=8)
+    with pytest.raises(ValueError, match="young_modulusx"):
+        generate_dataset(
+            case,
+            "/nonexistent",
+            n_train=1,
+            n_valid=0,
+            n_test=0,
+            steps=4,
+            write_every=2,
+            vary={"young_modulusx": (1, 2)},
+        )
+    with pytest.raises(ValueError, match="write_every"):
+        generate_dataset(
+            case, "/nonexistent", n_train=1, n_valid=0, n_test=0, steps=5, write_every=2
+        )
+
+
+def test_cli_parses_the_dataset_command():
+    from sphjax.cli import _parser as build_parser
+
+    args = build_parser().parse_args(
+        [
+            "dataset",
+            "taylor_green",
+            "--out",
+            "d",
+            "--n-train",
+            "4",
+            "--n-valid",
+            "1",
+            "--n-test",
+            "1",
+            "--steps",
+            "20",
+            "--write-every",
+            "5",
+            "--vary",
+            "kinematic_viscosity=0.005:0.02",
+            "--seed",
+            "7",
+            "--case-arg",
+            "n=16",
+            "--resume",
+        ]
+    )
+    assert args.vary == [("kinematic_viscosity", (0.005, 0.02))]
+    assert args.case_arg == [("n", 16)] and args.resume and args.seed == 7
+    assert args.func.__name__ == "main_dataset"
+
+
+def test_sharded_run_matches_single_device(dataset, tmp_path):
+    """Four forced host devices (a fresh process) give the same trajectories."""
+    script = Path(__file__).with_name("_tiny_dataset.py")
+    env = dict(os.environ, XLA_FLAGS="--xla_force_host_platform_device_count=4")
+    run = subprocess.run(
+        [sys.executable, str(script), str(tmp_path / "tg4"), "4"],
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
+    assert run.returncode == 0, run.stderr[-3000:]
+    assert "devices 4" in run.stdout
+    for split in ("train", "valid", "test"):
+        a, b = _read(dataset, split), _read(tmp_path / "tg4", split)
+        assert sorted(a) == sorted(b)
+        for k in a:
+            np.testing.assert_allclose(a[k][0], b[k][0], rtol=0, atol=1e-6)
