@@ -125,15 +125,20 @@ class NeighborSearch:
 
     @functools.cache  # noqa: B019 (one NeighborSearch per Model, cached in integrate)
     def _functions(self, dr_threshold: float):
-        displacement, _ = jmd_space.periodic(self.box)
-        return partition.neighbor_list(
-            displacement,
-            self.box,
-            r_cutoff=self.model.cutoff + (self.skin if dr_threshold == 0 else 0.0),
-            dr_threshold=dr_threshold,
-            capacity_multiplier=self.model.neighbor_capacity,
-            format=partition.Dense,
-        )
+        # jax-md computes a few constants (box, cutoffs) with jax.numpy when the functions
+        # are built.  The first call may happen inside a trace (``rebuild`` under
+        # ``jax.grad``); build them eagerly so the cache never holds a tracer that would
+        # leak into later traces (UnexpectedTracerError).
+        with jax.ensure_compile_time_eval():
+            displacement, _ = jmd_space.periodic(self.box)
+            return partition.neighbor_list(
+                displacement,
+                self.box,
+                r_cutoff=self.model.cutoff + (self.skin if dr_threshold == 0 else 0.0),
+                dr_threshold=dr_threshold,
+                capacity_multiplier=self.model.neighbor_capacity,
+                format=partition.Dense,
+            )
 
     def allocate(self, position, extra_capacity: int = 0):
         """A new neighbour list for concrete ``position`` (outside ``jit``)."""

@@ -85,6 +85,10 @@ def test_viscosity_recovered_from_taylor_green_decay():
     example = _example("calibrate_viscosity")
     result, truth = example.run(n=8, verbose=False)
     error = abs(result.values["kinematic_viscosity"] / truth - 1.0)
+    print(
+        f"nu recovered {result.values['kinematic_viscosity']:.8g}, error {error:.2e}, "
+        f"{result.iterations} iterations"
+    )
     assert error <= 0.02, result.history
     assert result.iterations <= 30
     assert result.history["loss"][-1] < 1e-3 * result.history["loss"][0]
@@ -92,10 +96,18 @@ def test_viscosity_recovered_from_taylor_green_decay():
 
 @pytest.mark.slow
 def test_youngs_modulus_and_poisson_ratio_recovered_from_plate_tip():
-    """examples/calibrate_youngs_modulus.py, small (n = 2, 2000 steps, 1 % noise): from E/2
-    and nu = 0.3 to E within 1 % and nu within 5 % in <= 100 iterations."""
+    """examples/calibrate_youngs_modulus.py (n = 2, 48 particles; observation windows of
+    2000 then 6000 steps, one observation per 10 steps, 1 % noise): from E/2 and nu = 0.3
+    to E within 1 % and nu within 5 % in <= 100 iterations.  (The shorter windows 1000/2000
+    of SPHJAX_SMALL give E to 2.5 % only: the frequency is not pinned down well enough.)"""
     example = _example("calibrate_youngs_modulus")
-    result, (E, nu), _, _ = example.run(n_steps=2000, save_every=40, verbose=False)
+    result, (E, nu), _, _ = example.run(windows=(2000, 6000), verbose=False)
+    E_fit, nu_fit = result.values["young_modulus"], result.values["poisson_ratio"]
+    print(
+        f"E {E_fit:.8g} ({E_fit / E - 1:+.2e}), nu {nu_fit:.8g} ({nu_fit / nu - 1:+.2e}), "
+        f"{result.iterations} iterations"
+    )
     assert abs(result.values["young_modulus"] / E - 1.0) <= 0.01, result.values
     assert abs(result.values["poisson_ratio"] / nu - 1.0) <= 0.05, result.values
     assert result.iterations <= 100
+    assert len(result.history["loss"]) == result.iterations
