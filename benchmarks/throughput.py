@@ -74,7 +74,9 @@ def run_sphjax(n: int, steps: int, repeats: int, skin: float | None = None) -> d
 
     import sphjax
 
-    case = sphjax.cases.taylor_green(n=n, kernel="quintic_spline", density="summation")
+    case = sphjax.cases.taylor_green(
+        n=n, kernel="quintic_spline", h_factor=1.0, density="summation", transport_velocity=False
+    )
     if skin is not None:
         case = case.replace(model=case.model.replace(neighbor_skin=skin))
     dt = time_step(n)

@@ -433,7 +433,7 @@ def generate_dataset(
             batch = todo[start : start + batch_size]
             positions = runner([j[2] for j in batch], [j[3] for j in batch], batch_size)
             for (split, i, _, _), x in zip(batch, positions, strict=True):
-                _check_finite(x, split, i, batch, case)
+                _check_finite(x, split, i)
                 tmp = partial / f"tmp_{split}_{i:05d}.npy"
                 np.save(tmp, x.astype(np.float32))
                 os.replace(tmp, part_file(split, i))
@@ -445,7 +445,7 @@ def generate_dataset(
     return out
 
 
-def _check_finite(x, split, i, batch, case):
+def _check_finite(x, split, i):
     if not np.all(np.isfinite(x)):
         frame = int(np.argmax(~np.all(np.isfinite(x), axis=(1, 2))))
         raise RuntimeError(

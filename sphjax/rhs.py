@@ -101,7 +101,8 @@ def fluid_rates(state: State, idx, model: Model, params: Params, density_step=No
     is_fluid = kind == Kind.FLUID
     is_wall = kind == Kind.WALL
     with_walls = has_kind(model, Kind.WALL)
-    fluid_nb = is_fluid[pairs.j]
+    # a fluid-only model needs no per-pair kind lookup
+    fluid_nb = is_fluid[pairs.j] if len(model.particle_kinds) > 1 else True
     pairs_fluid = pairs.restrict(fluid_nb)
     pairs_hydro = pairs.restrict(fluid_nb | is_wall[pairs.j]) if with_walls else pairs_fluid
 

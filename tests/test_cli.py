@@ -7,6 +7,7 @@ import subprocess
 import sys
 
 import h5py
+import jax
 import pytest
 
 import sphjax
@@ -140,11 +141,11 @@ def test_entry_point_user_error_has_no_traceback():
     assert "available cases:" in result.stderr and "Traceback" not in result.stderr
 
 
-@pytest.mark.slow
-def test_entry_point_float64_run(tmp_path):
+def test_float64_run_is_scoped_to_the_command(tmp_path):
     out = tmp_path / "x64.h5"
-    result = cli("run", *TINY, "--float64", "--out", str(out))
-    assert result.returncode == 0, result.stderr[-3000:]
+    assert main(["run", *TINY, "--float64", "--out", str(out)]) == 0
     with h5py.File(out, "r") as f:
         assert f["states/position"].dtype == "float64"
+        assert f["params"].attrs["sound_speed"].dtype == "float64"
         assert f["times"].shape == (5,)
+    assert not jax.config.jax_enable_x64  # the rest of the session stays in float32

@@ -180,7 +180,13 @@ def test_cli_parses_the_dataset_command():
 def test_sharded_run_matches_single_device(dataset, tmp_path):
     """Four forced host devices (a fresh process) give the same trajectories."""
     script = Path(__file__).with_name("_tiny_dataset.py")
-    env = dict(os.environ, XLA_FLAGS="--xla_force_host_platform_device_count=4")
+    import jax
+
+    env = dict(
+        os.environ,
+        XLA_FLAGS="--xla_force_host_platform_device_count=4",
+        JAX_ENABLE_X64=str(bool(jax.config.jax_enable_x64)),  # same precision as this session
+    )
     run = subprocess.run(
         [sys.executable, str(script), str(tmp_path / "tg4"), "4"],
         env=env,

@@ -22,6 +22,23 @@ def _frames_at(case, times, n_steps):
     return traj
 
 
+def test_taylor_green_kinetic_energy_decay():
+    """KE(t)/KE0 = exp(-16 pi^2 nu t) (0.454 at t = 0.5 for Re = 100): within 5 % at
+    t = 0.5 (issue 2).  50 x 50 particles, c0 = 10 U, transport-velocity formulation."""
+    case = sphjax.cases.taylor_green(n=50)
+    n_steps = int(np.ceil(0.5 / case.dt))
+    n_steps += (-n_steps) % 5
+    dt = 0.5 / n_steps  # land exactly on t = 0.5
+    traj = sphjax.simulate(case, n_steps=n_steps, save_every=n_steps // 5, dt=dt)
+    mass = np.asarray(traj.states.mass)
+    ke = 0.5 * np.sum(mass * np.sum(np.asarray(traj.states.velocity) ** 2, -1), -1)
+    t = np.asarray(traj.times)
+    assert t[-1] == pytest.approx(0.5)
+    exact = np.exp(-16 * np.pi**2 * 0.01 * t)
+    assert exact[-1] == pytest.approx(0.454, abs=5e-4)  # VALIDATION.md
+    assert ke[-1] / ke[0] == pytest.approx(exact[-1], rel=0.05)
+
+
 def test_poiseuille_startup_and_steady_centreline_speed():
     """Morris et al. (1997): u(L/2, t) = 4.47e-6, 1.65e-5, 2.22e-5 m/s at t = 0.0225,
     0.1125, 0.225 s (within 5 %) and F L^2 / (8 nu) = 2.5e-5 m/s at steady state (3 %).
