@@ -143,9 +143,14 @@ def test_entry_point_user_error_has_no_traceback():
 
 def test_float64_run_is_scoped_to_the_command(tmp_path):
     out = tmp_path / "x64.h5"
-    assert main(["run", *TINY, "--float64", "--out", str(out)]) == 0
-    with h5py.File(out, "r") as f:
-        assert f["states/position"].dtype == "float64"
-        assert f["params"].attrs["sound_speed"].dtype == "float64"
-        assert f["times"].shape == (5,)
-    assert not jax.config.jax_enable_x64  # the rest of the session stays in float32
+    before = jax.config.jax_enable_x64  # tests/conftest.py turns float64 on
+    jax.config.update("jax_enable_x64", False)
+    try:
+        assert main(["run", *TINY, "--float64", "--out", str(out)]) == 0
+        with h5py.File(out, "r") as f:
+            assert f["states/position"].dtype == "float64"
+            assert f["params"].attrs["sound_speed"].dtype == "float64"
+            assert f["times"].shape == (5,)
+        assert not jax.config.jax_enable_x64  # the rest of the session stays in float32
+    finally:
+        jax.config.update("jax_enable_x64", before)

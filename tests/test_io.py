@@ -156,4 +156,5 @@ def test_killed_run_keeps_written_frames(tmp_path):
     case = sphjax.cases.get("taylor_green", n=4)
     for frame in range(6):
         expected = np.asarray(case.state.position) + frame // 2 + frame % 2
-        np.testing.assert_array_equal(trajectory.states.position[frame], expected)
+        # the killed process ran in float32, this session in float64
+        np.testing.assert_allclose(trajectory.states.position[frame], expected, rtol=1e-6)

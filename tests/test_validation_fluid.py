@@ -14,14 +14,6 @@ from sphjax.cases import poiseuille_startup_speed, surge_front
 pytestmark = pytest.mark.slow
 
 
-def _frames_at(case, times, n_steps):
-    """Simulate ``n_steps`` saving often enough to interpolate at ``times``."""
-    save_every = max(1, n_steps // 200)
-    n_steps -= n_steps % save_every
-    traj = sphjax.simulate(case, n_steps=n_steps, save_every=save_every)
-    return traj
-
-
 def test_taylor_green_kinetic_energy_decay():
     """KE(t)/KE0 = exp(-16 pi^2 nu t) (0.454 at t = 0.5 for Re = 100): within 5 % at
     t = 0.5 (issue 2).  50 x 50 particles, c0 = 10 U, transport-velocity formulation."""
@@ -46,8 +38,13 @@ def test_poiseuille_startup_and_steady_centreline_speed():
     case = sphjax.cases.poiseuille(n=20)
     info = case.info
     L, nu, F = info["width"], info["viscosity"], info["body_force"]
-    n_steps = int(round(1.0 / case.dt))
-    traj = _frames_at(case, None, n_steps)
+    # a step that lands on multiples of 0.0225 s: frames at the three reference times
+    steps_per_frame = int(np.ceil(0.0225 / case.dt))
+    dt = 0.0225 / steps_per_frame
+    n_frames = 45  # t_end = 1.0125 s, steady to 0.01 % (slowest mode exp(-pi^2 nu t / L^2))
+    traj = sphjax.simulate(
+        case, n_steps=n_frames * steps_per_frame, save_every=steps_per_frame, dt=dt
+    )
     times = np.asarray(traj.times)
     fluid = np.asarray(traj.states.kind[0]) == Kind.FLUID
 
@@ -60,6 +57,7 @@ def test_poiseuille_startup_and_steady_centreline_speed():
 
     for t_ref, u_ref in [(0.0225, 4.47e-6), (0.1125, 1.65e-5), (0.225, 2.22e-5)]:
         i = int(np.argmin(np.abs(times - t_ref)))
+        assert times[i] == pytest.approx(t_ref)
         analytic = poiseuille_startup_speed(L / 2, times[i], L, nu, F)
         assert analytic == pytest.approx(u_ref, rel=0.01)  # the series reproduces the table
         assert centreline_speed(i) == pytest.approx(analytic, rel=0.05)
