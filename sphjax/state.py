@@ -252,7 +252,8 @@ class Model:
         Hu & Adams (2013), ``v~ = v + dt/2 a_b`` with the background-pressure acceleration
         ``a_b`` (pressure ``Params.transport_pressure``), which keeps the particle
         distribution regular (needed for Taylor-Green).
-      density_diffusion: ``None`` or ``"molteni"`` / ``"antuono"`` (delta-SPH).
+      density_diffusion: ``None`` or ``"molteni"`` (Molteni & Colagrossi delta-SPH, with
+        the hydrostatic density difference removed).
       wall_slip: ``"no_slip"`` or ``"free_slip"`` for the Adami wall viscous term.
       solid_penalty: include the hourglass penalty force of eq. 14.
       clamped_motion: ``None`` (clamped particles stay put) or a hashable function
@@ -295,10 +296,9 @@ class Model:
             raise ValueError(
                 f"Model.density must be 'summation' or 'continuity', got {self.density!r}"
             )
-        if self.density_diffusion not in (None, "molteni", "antuono"):
+        if self.density_diffusion not in (None, "molteni"):
             raise ValueError(
-                "Model.density_diffusion must be None, 'molteni' or 'antuono', "
-                f"got {self.density_diffusion!r}"
+                f"Model.density_diffusion must be None or 'molteni', got {self.density_diffusion!r}"
             )
         if self.wall_slip not in ("no_slip", "free_slip"):
             raise ValueError(
