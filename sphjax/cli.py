@@ -219,7 +219,7 @@ def cmd_run(args) -> int:
 def _run(args, out: Path) -> int:
     from tqdm import tqdm
 
-    from sphjax.integrate import SimulationError, simulate
+    from sphjax.integrate import NeighborOverflowError, SimulationError, simulate
     from sphjax.io import TrajectoryWriter
 
     case = _build_case(args)
@@ -256,6 +256,14 @@ def _run(args, out: Path) -> int:
                 f"sphjax run: error: {err}\nstopped at step {err.step}, particle "
                 f"{err.particle}; the {writer.n_frames} frames before it are in {out}. "
                 "Try a smaller --dt.",
+                file=sys.stderr,
+            )
+            return EXIT_UNSTABLE
+        except NeighborOverflowError as err:
+            bar.close()
+            writer.set_error(str(err))
+            print(
+                f"sphjax run: error: {err}\nthe {writer.n_frames} frames before it are in {out}.",
                 file=sys.stderr,
             )
             return EXIT_UNSTABLE

@@ -41,6 +41,7 @@ import numpy as np
 from sphjax import cases as cases_module
 from sphjax.case import Case
 from sphjax.integrate import simulate
+from sphjax.space import minimum_image
 from sphjax.state import Kind, Params, State
 from sphjax.timestep import check_time_step, stable_time_step
 
@@ -188,7 +189,7 @@ def frame_differences(position, bounds, periodic):
     size = np.diff(np.asarray(bounds, np.float64), axis=1)[:, 0]
     periodic = np.asarray(periodic, bool)
     vel = x[1:] - x[:-1]
-    vel = np.where(periodic, vel - size * np.round(vel / size), vel)
+    vel = minimum_image(vel, size, periodic)
     return vel, vel[1:] - vel[:-1]
 
 

@@ -359,6 +359,7 @@ def simulate(
         on_frames(all_frames[0], jnp.zeros(1))
     frames_per_chunk = max(1, steps_per_chunk // save_every)
     done = 0
+    extra = 0  # neighbour slots added beyond the allocation's own estimate
     while done < n_frames:
         k = min(frames_per_chunk, n_frames - done)
         for _attempt in range(10):
@@ -377,7 +378,10 @@ def simulate(
             if not bool(_overflowed(carry[1])):
                 break
             old = capacity(neighbors.fluid)
-            neighbors = build_neighbors(state, model, extra_capacity=max(1, old // 2))
+            # grow on every retry: the chunk's start positions may need less room than
+            # the positions where it overflowed
+            extra = max(extra + old // 2, 1)
+            neighbors = build_neighbors(state, model, extra_capacity=extra)
             warnings.warn(
                 f"neighbour list overflowed near step {int(step)}; re-allocated "
                 f"{old} -> {capacity(neighbors.fluid)} slots and repeated the chunk",

@@ -127,6 +127,11 @@ def kernel_by_name(name: str) -> Kernel:
         raise ValueError(f"unknown kernel {name!r}; choose one of {sorted(KERNELS)}") from None
 
 
+def as_kernel(kernel: Kernel | str) -> Kernel:
+    """A kernel object from a kernel or its name (case factories accept both)."""
+    return kernel_by_name(kernel) if isinstance(kernel, str) else kernel
+
+
 def W(kernel: Kernel, r, h, dim: int):
     """Kernel value ``W(r, h) = sigma_d / h^d f(r / h)`` (eq. 4)."""
     return kernel.normalisation(dim) / h**dim * kernel.shape(r / h)

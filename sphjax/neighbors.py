@@ -25,7 +25,7 @@ from jax_md import partition
 from jax_md import space as jmd_space
 
 from sphjax import kernels
-from sphjax.space import safe_norm
+from sphjax.space import minimum_image, safe_norm
 from sphjax.state import Model
 
 
@@ -201,7 +201,7 @@ def reference_neighbors(reference_position, members, model: Model) -> np.ndarray
         if cand.size:
             dr = Xm[k] - Xm[cand]
             if periodic.any():
-                dr = np.where(periodic, dr - size * np.round(dr / size), dr)
+                dr = minimum_image(dr, size, periodic)
             close = np.sum(dr * dr, axis=1) < cutoff**2
             cand = cand[close]
         lists.append(members[cand] if cand.size else np.zeros(0, np.int64))

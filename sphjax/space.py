@@ -9,8 +9,22 @@ gradient that stays finite at ``dr = 0`` (the double-where idiom).
 from __future__ import annotations
 
 import jax.numpy as jnp
+import numpy as np
 
 from sphjax.state import Domain
+
+
+def minimum_image(dr, size, periodic):
+    """``dr`` wrapped to the nearest image on the periodic axes (numpy or jax arrays).
+
+    Args:
+      dr: ``[..., d]`` differences of positions.
+      size: ``[d]`` box lengths; periodic: ``[d]`` bools.
+    """
+    xp = np if isinstance(dr, np.ndarray) else jnp
+    periodic = xp.asarray(periodic, dtype=bool)
+    size = xp.asarray(size, dtype=dr.dtype)
+    return xp.where(periodic, dr - size * xp.round(dr / size), dr)
 
 
 def displacement_fn(domain: Domain):
@@ -22,9 +36,7 @@ def displacement_fn(domain: Domain):
         dr = Ra - Rb
         if not any(domain.periodic):
             return dr
-        size_ = size.astype(dr.dtype)
-        wrapped = dr - size_ * jnp.round(dr / size_)
-        return jnp.where(periodic, wrapped, dr)
+        return minimum_image(dr, size, periodic)
 
     return displacement
 

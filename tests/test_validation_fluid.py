@@ -9,7 +9,7 @@ import pytest
 
 import sphjax
 from sphjax import Kind
-from sphjax.cases import poiseuille_startup_speed, surge_front
+from sphjax.cases import poiseuille_centreline_speed, poiseuille_startup_speed, surge_front
 
 pytestmark = pytest.mark.slow
 
@@ -46,14 +46,9 @@ def test_poiseuille_startup_and_steady_centreline_speed():
         case, n_steps=n_frames * steps_per_frame, save_every=steps_per_frame, dt=dt
     )
     times = np.asarray(traj.times)
-    fluid = np.asarray(traj.states.kind[0]) == Kind.FLUID
 
     def centreline_speed(i):
-        y = np.asarray(traj.states.position[i])[fluid, 1]
-        u = np.asarray(traj.states.velocity[i])[fluid, 0]
-        near = np.abs(y - L / 2) < 0.6 * info["dx"]
-        # rows at L/2 -/+ dx/2: correct the parabola's curvature to the centreline
-        return float(np.mean(u[near])) + F / (2 * nu) * (info["dx"] / 2) ** 2
+        return poiseuille_centreline_speed(traj.frame(i), case)
 
     for t_ref, u_ref in [(0.0225, 4.47e-6), (0.1125, 1.65e-5), (0.225, 2.22e-5)]:
         i = int(np.argmin(np.abs(times - t_ref)))

@@ -10,13 +10,9 @@ import numpy as np
 from sphjax.case import Case
 from sphjax.cases._geometry import box_walls, check_positive, check_resolution, lattice, wall_layers
 from sphjax.fluid.eos import tait_density
-from sphjax.kernels import QuinticSpline, WendlandC2, kernel_by_name
+from sphjax.kernels import QuinticSpline, WendlandC2, as_kernel
 from sphjax.state import Domain, Kind, Model, make_params, make_state
 from sphjax.timestep import stable_time_step
-
-
-def _kernel(kernel):
-    return kernel_by_name(kernel) if isinstance(kernel, str) else kernel
 
 
 def _finish(name, state, model, params, t_end, info, dt=None):
@@ -94,7 +90,7 @@ def taylor_green(
         transport_pressure=transport_pressure_factor * rho0 * c0**2,
     )
     rho = np.asarray(tait_density(jnp.asarray(p + p0), rho0, c0, gamma, p0))
-    kernel = _kernel(kernel)
+    kernel = as_kernel(kernel)
     model = Model(
         dim=2,
         smoothing_length=h_factor * dx,
@@ -135,7 +131,7 @@ def poiseuille(
     nu = check_positive("viscosity", viscosity)
     F = check_positive("body_force", body_force)
     dx = L / n
-    kernel = _kernel(kernel)
+    kernel = as_kernel(kernel)
     h = dx
     layers = wall_layers(kernel.support * h, dx)
     length = max(L, 2.0 * (kernel.support * h) * 1.5)
@@ -185,6 +181,23 @@ def poiseuille_startup_speed(y, t, width, viscosity, body_force, terms: int = 20
             -(m**2) * np.pi**2 * nu * t / L**2
         )
     return u
+
+
+def poiseuille_centreline_speed(state, case: Case) -> float:
+    """Centreline speed ``u(L/2)`` of a Poiseuille state.
+
+    With an even number of rows the centreline lies between the rows at ``L/2 -+ dx/2``;
+    their mean speed is corrected by the curvature of the parabola,
+    ``F / (2 nu) (dx / 2)^2``.
+    """
+    info = case.info
+    L, dx = info["width"], info["dx"]
+    fluid = np.asarray(state.kind) == Kind.FLUID
+    y = np.asarray(state.position)[fluid, 1]
+    u = np.asarray(state.velocity)[fluid, 0]
+    near = np.abs(y - L / 2) < 0.6 * dx
+    curvature = info["body_force"] / (2 * info["viscosity"]) * (dx / 2) ** 2
+    return float(np.mean(u[near])) + curvature
 
 
 def _tank(

@@ -21,16 +21,12 @@ import numpy as np
 
 from sphjax.case import Case
 from sphjax.cases._geometry import check_positive, check_resolution
-from sphjax.kernels import kernel_by_name
+from sphjax.kernels import as_kernel
 from sphjax.state import Domain, Kind, Model, make_params, make_state
 from sphjax.timestep import stable_time_step
 
 # Gray, Monaghan & Swift (2001) first bending mode: k L = 1.87510 (VALIDATION.md).
 PLATE_KL = 1.8751040687
-
-
-def _kernel(kernel):
-    return kernel_by_name(kernel) if isinstance(kernel, str) else kernel
 
 
 def plate_mode_shape(s, kL: float = PLATE_KL):
@@ -151,7 +147,7 @@ def oscillating_plate(
     n_clamp = int(round(clamp_length / dx))
     x = _strip(0.0, -0.5 * H, nx, n, dx, i_start=-n_clamp)
     kind = np.where(x[:, 0] > 0.0, Kind.SOLID, Kind.CLAMPED).astype(np.int32)
-    kernel = _kernel(kernel)
+    kernel = as_kernel(kernel)
     h = h_factor * dx
     # clamped particles further than two kernel supports from the plate cannot act on it
     keep = x[:, 0] > -2.0 * kernel.support * h
@@ -242,7 +238,7 @@ def turek_hron_csm(
     y_low = 0.2 - 0.5 * thickness
     dx = thickness / n
     nx = int(round(length / dx))
-    kernel = _kernel(kernel)
+    kernel = as_kernel(kernel)
     h = h_factor * dx
     cutoff = kernel.support * h
     n_back = int(math.ceil(2.0 * radius / dx)) + 1

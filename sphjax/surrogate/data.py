@@ -18,6 +18,8 @@ import h5py
 import jax.numpy as jnp
 import numpy as np
 
+from sphjax.space import minimum_image
+
 PAD, FLUID = -1, 0
 
 
@@ -100,7 +102,7 @@ def displacement(a, b, bounds, periodic):
     d = a - b
     if not any(periodic):
         return d
-    return xp.where(xp.asarray(periodic), d - size * xp.round(d / size), d)
+    return minimum_image(d, size, periodic)
 
 
 def wrap(x, bounds, periodic):
