@@ -18,8 +18,12 @@ The loop accepts any optax optimiser (``optax.adam(0.05)``, ``optax.lbfgs()``, a
     )
     result.values["kinematic_viscosity"], result.history["loss"]
 
-``jax.value_and_grad`` of the loss is compiled once; every iteration is one forward and
-one reverse pass through the whole simulation.
+The loss and its gradient are compiled once.  ``mode="reverse"`` takes the gradient with
+``jax.value_and_grad`` (one forward and one reverse pass, whatever the number of fitted
+fields); ``mode="forward"`` with one forward-mode tangent per fitted field (``jax.jvp``,
+vmapped): nothing is stored along the simulation and, for one or two fields, it is the
+cheaper of the two (``docs/performance_gradients.md``).  ``"auto"`` (the default) picks
+forward mode for at most two fields.
 """
 
 from __future__ import annotations
@@ -31,6 +35,7 @@ from collections.abc import Callable, Mapping
 import jax
 import jax.numpy as jnp
 import optax
+from jax.flatten_util import ravel_pytree
 
 from sphjax.state import Params
 
@@ -84,6 +89,27 @@ def relative_misfit(simulated, observed, weights=None):
     return num / den
 
 
+MODES = ("auto", "forward", "reverse")
+FORWARD_MODE_MAX_FIELDS = 2
+
+
+def forward_value_and_grad(fn):
+    """``fn(theta) -> (value, gradient)`` by forward mode: one ``jax.jvp`` tangent per
+    entry of ``theta`` (a pytree of arrays), vmapped, so the primal runs once and nothing
+    is stored for a reverse pass.  Same result as ``jax.value_and_grad(fn)``."""
+
+    def value_and_grad(theta):
+        flat, unravel = ravel_pytree(theta)
+
+        def along(tangent):
+            return jax.jvp(lambda x: fn(unravel(x)), (flat,), (tangent,))
+
+        value, slopes = jax.vmap(along, out_axes=(None, 0))(jnp.eye(flat.size, dtype=flat.dtype))
+        return value, unravel(slopes)
+
+    return value_and_grad
+
+
 def calibrate(
     observables: Callable[[Params], jax.Array],
     observed,
@@ -96,6 +122,7 @@ def calibrate(
     weights=None,
     loss_tolerance: float | None = None,
     step_tolerance: float | None = None,
+    mode: str = "auto",
     verbose: bool = True,
     print_fn: Callable[[str], None] = print,
 ) -> CalibrationResult:
@@ -119,6 +146,9 @@ def calibrate(
       loss_tolerance: stop once the loss is below this.
       step_tolerance: stop once every fitted value changes by less than this
         relative amount in one update.
+      mode: how the gradient is taken: ``"reverse"`` (``jax.value_and_grad``),
+        ``"forward"`` (one ``jax.jvp`` tangent per field) or ``"auto"``: forward for at
+        most two fields, reverse otherwise.
       verbose: print one line per iteration.
     Returns:
       :class:`CalibrationResult`.
@@ -126,6 +156,10 @@ def calibrate(
     names = tuple(initial)
     if not names:
         raise ValueError("initial: give at least one Params field to fit")
+    if mode not in MODES:
+        raise ValueError(f"mode must be one of {MODES}, got {mode!r}")
+    if mode == "auto":
+        mode = "forward" if len(names) <= FORWARD_MODE_MAX_FIELDS else "reverse"
     fields = {f.name for f in dataclasses.fields(Params)}
     for name in names:
         if name not in fields:
@@ -165,7 +199,8 @@ def calibrate(
     def loss_fn(theta):
         return relative_misfit(observables(to_params(theta)), observed, weights)
 
-    value_and_grad = jax.jit(jax.value_and_grad(loss_fn))
+    differentiate = forward_value_and_grad if mode == "forward" else jax.value_and_grad
+    value_and_grad = jax.jit(differentiate(loss_fn))
     if isinstance(optimizer, optax.GradientTransformationExtraArgs):
 
         @jax.jit
@@ -227,4 +262,4 @@ def calibrate(
     )
 
 
-__all__ = ["CalibrationResult", "calibrate", "relative_misfit"]
+__all__ = ["CalibrationResult", "calibrate", "forward_value_and_grad", "relative_misfit"]

@@ -34,6 +34,7 @@ from collections.abc import Callable
 import jax
 import jax.numpy as jnp
 import numpy as np
+from jax.ad_checkpoint import checkpoint_name
 
 from sphjax.case import Case
 from sphjax.neighbors import NeighborSearch, capacity, reference_neighbors
@@ -97,11 +98,17 @@ def build_neighbors(state: State, model: Model, extra_capacity: int = 0) -> Neig
     return Neighbors(fluid=fluid, solid_members=solid_members, solid_idx=solid_idx)
 
 
+_NEIGHBOR_IDX = "sphjax_neighbor_idx"
+_KEEP_NEIGHBOR_IDX = jax.checkpoint_policies.save_only_these_names(_NEIGHBOR_IDX)
+
+
 def _update_neighbors(position, neighbors: Neighbors, model: Model, rebuild=False) -> Neighbors:
     if neighbors.fluid is None:
         return neighbors
     search = _search(model)
     fluid = (search.rebuild if rebuild else search.update)(position, neighbors.fluid)
+    # named so that rematerialisation keeps the indices instead of repeating the search
+    fluid = fluid.set(idx=checkpoint_name(fluid.idx, _NEIGHBOR_IDX))
     return dataclasses.replace(neighbors, fluid=fluid)
 
 
@@ -180,14 +187,26 @@ def _step_with_checks(carry, dt, model, params):
 
 
 def _run_steps(carry, n_steps: int, checkpoint_every: int | None, step_fn):
-    """``n_steps`` steps; with ``checkpoint_every`` rematerialise steps and chunks."""
+    """``n_steps`` steps, each rematerialised in reverse mode; with ``checkpoint_every``
+    also in chunks of that many steps.
+
+    Reverse mode keeps only a step's input carry and recomputes its internals when it is
+    transposed: storing every pair quantity of every step instead would take about 100 x
+    the memory and, being memory-bound on the CPU, twice the time.  Without
+    ``checkpoint_every`` the input carry of every step is kept (memory grows with the
+    number of steps); with it, only the first carry of each chunk is kept, and a chunk is
+    replayed once more (memory flat, one more forward pass).  Outside differentiation
+    ``jax.checkpoint`` costs nothing.
+    """
 
     def body(c, _):
         return step_fn(c), None
 
     if checkpoint_every is None or n_steps <= 1:
-        return jax.lax.scan(body, carry, None, length=n_steps)[0]
-    body = jax.checkpoint(body)
+        return jax.lax.scan(jax.checkpoint(body), carry, None, length=n_steps)[0]
+    # a step's replay keeps its neighbour indices (recorded by the chunk replay) rather
+    # than repeating the cell-list search
+    body = jax.checkpoint(body, policy=_KEEP_NEIGHBOR_IDX)
     chunk_len = min(checkpoint_every, n_steps)
     n_chunks, rest = divmod(n_steps, chunk_len)
 
@@ -210,8 +229,8 @@ def _run_frames(
         carry = _run_steps(carry, save_every, checkpoint_every, step_fn)
         return carry, carry[0]
 
-    if checkpoint_every is not None:
-        frame = jax.checkpoint(frame)
+    # No checkpoint around a frame: its chunks already store only their first carry, and
+    # one more level would replay the whole frame once more in reverse mode.
     carry, frames = jax.lax.scan(frame, (state, neighbors, failure, step), None, length=n_frames)
     return carry, frames
 
@@ -281,8 +300,11 @@ def simulate(
         ``n_steps`` must be a multiple of it.
       dt: time step (default ``case.dt``); rejected above the stability limit.
       state: initial state (default ``case.state``).
-      checkpoint_every: rematerialise every step and every chunk of this many steps in
-        reverse mode, so memory does not grow with every step (``None``: store all).
+      checkpoint_every: in reverse mode every step is rematerialised (only its input
+        carry is stored, about ``N * (4 d + 6 + K)`` numbers); with ``checkpoint_every``
+        the steps are also grouped in chunks of this many and only each chunk's first
+        carry is stored, so memory does not grow with every step, for one more forward
+        pass.  ``None``: store every step's carry (faster, memory linear in ``n_steps``).
       on_frames: ``f(states, times)`` called with each finished block of frames (concrete
         runs only); used to append to HDF5 as the run goes.
       progress: ``f(n)`` called with the number of steps just completed.
