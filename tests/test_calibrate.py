@@ -134,8 +134,8 @@ def test_viscosity_recovered_from_taylor_green_decay():
 def test_youngs_modulus_and_poisson_ratio_recovered_from_plate_tip():
     """examples/calibrate_youngs_modulus.py (n = 2, 48 particles; observation windows of
     2000 then 6000 steps, one observation per 10 steps, 1 % noise): from E/2 and nu = 0.3
-    to E within 1 % and nu within 5 % in <= 100 iterations.  (The shorter windows 1000/2000
-    of SPHJAX_SMALL give E to 2.5 % only: the frequency is not pinned down well enough.)"""
+    to E within 1 % and nu within 5 % in <= 100 iterations.  (Shorter windows, 1000/2000,
+    give E to 2.5 % only: the frequency is not pinned down well enough.)"""
     example = _example("calibrate_youngs_modulus")
     result, (E, nu), _, _ = example.run(windows=(2000, 6000), verbose=False)
     E_fit, nu_fit = result.values["young_modulus"], result.values["poisson_ratio"]
