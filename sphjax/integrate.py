@@ -18,8 +18,9 @@ are kept in the State, so they are not recomputed.
 chunk it checks for neighbour-list overflow (re-allocating and repeating the chunk) and
 for an unstable run (NaN, a particle leaving the domain), and hands finished frames to
 ``on_frames`` (the HDF5 writer).  Under ``jax.grad``, ``jit`` or ``vmap`` it is a single
-``lax.scan`` with optional nested rematerialisation (``checkpoint_every``) and the same
-checks raised from inside the computation.
+``lax.scan`` whose steps are rematerialised in reverse mode (and, with
+``checkpoint_every``, chunks of steps too), with the same checks raised from inside the
+computation.
 """
 
 from __future__ import annotations
