@@ -2,6 +2,7 @@
 
 * ``simulate`` under ``grad``, ``value_and_grad``, ``jvp`` and ``vmap`` w.r.t. Params and
   the initial State;
+* reverse-mode memory: with ``checkpoint_every`` 4x the steps take at most 2x the memory;
 * no NaN gradients at coincident particles, at the artificial-viscosity switch
   (``v_ab . r_ab = 0``) and at the clip of the inverse equation of state;
 * gradient correctness against central finite differences (acceptance numbers of the
@@ -105,6 +106,32 @@ def test_grad_wrt_initial_positions_matches_jvp():
 
 
 # ----------------------------------------------------------------- no NaN gradients
+
+
+def _reverse_mode_scratch_bytes(case, n_steps, checkpoint_every):
+    """XLA's scratch memory for ``jax.grad`` of KE(after ``n_steps``) w.r.t. nu."""
+
+    def loss(nu):
+        params = case.params.replace(kinematic_viscosity=nu)
+        final = sphjax.simulate(
+            case, params, n_steps=n_steps, checkpoint_every=checkpoint_every
+        ).final
+        return kinetic_energy(final)
+
+    compiled = jax.jit(jax.grad(loss)).lower(case.params.kinematic_viscosity).compile()
+    return compiled.memory_analysis().temp_size_in_bytes
+
+
+def test_checkpointing_keeps_reverse_mode_memory_from_growing_with_every_step():
+    """The gradients issue: with checkpointing, memory at 4x the steps is at most 2x;
+    without it, it grows with every step (so the first assertion could fail).  Measured as
+    the compiled program's scratch memory, which is deterministic."""
+    case = sphjax.cases.taylor_green(n=8)
+    chunked = [_reverse_mode_scratch_bytes(case, n, 40) for n in (400, 1600)]
+    per_step = [_reverse_mode_scratch_bytes(case, n, None) for n in (400, 1600)]
+    print(f"scratch bytes, 400 -> 1600 steps: chunks of 40 {chunked}, per step {per_step}")
+    assert chunked[1] <= 2.0 * chunked[0]
+    assert per_step[1] >= 3.0 * per_step[0]
 
 
 def test_no_nan_gradients_at_coincident_particles_and_switches():
