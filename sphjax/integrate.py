@@ -81,9 +81,13 @@ jax.tree_util.register_dataclass(Trajectory, data_fields=["states", "times"], me
 # ---------------------------------------------------------------------------- neighbours
 
 
-@functools.lru_cache(maxsize=64)
 def _search(model: Model) -> NeighborSearch:
-    return NeighborSearch(model)
+    return _search_for(model, bool(jax.config.jax_enable_x64))
+
+
+@functools.lru_cache(maxsize=64)
+def _search_for(model: Model, x64: bool) -> NeighborSearch:
+    return NeighborSearch(model, x64=x64)
 
 
 def build_neighbors(state: State, model: Model, extra_capacity: int = 0) -> Neighbors:

@@ -89,9 +89,13 @@ class NeighborSearch:
     Positions are shifted into the box jax-md expects (``[0, L)`` per axis).  Non-periodic
     axes get a padded box (``size + 2 (cutoff + skin)``) so that no image across them is
     ever within the cutoff.
+
+    ``x64`` is the ``jax_enable_x64`` setting the jax-md functions are built under: they
+    hold constants of that precision, so a session that switches it needs another search.
     """
 
     model: Model
+    x64: bool = False
 
     @property
     def skin(self) -> float:

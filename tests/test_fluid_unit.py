@@ -102,3 +102,22 @@ def test_hydrostatic_wall_pressure_extrapolation():
     )
     expected = 1000.0 * g * (H - y[first_layer])
     np.testing.assert_allclose(p[first_layer], expected, rtol=0.02)
+
+
+def test_switching_float64_off_and_on_within_a_session():
+    """The cached jax-md functions hold constants of the precision they were built in;
+    a session that turns ``jax_enable_x64`` off after a float64 run (the case the
+    benchmarks and notebooks hit) must build new ones, not fail to lower."""
+    old = jax.config.jax_enable_x64
+    try:
+        finals = {}
+        for x64 in (True, False, True):
+            jax.config.update("jax_enable_x64", x64)
+            case = sphjax.cases.taylor_green(n=8)
+            final = sphjax.simulate(case, n_steps=5).final
+            assert final.position.dtype == (jnp.float64 if x64 else jnp.float32)
+            finals.setdefault(x64, []).append(np.asarray(final.velocity))
+        np.testing.assert_allclose(finals[False][0], finals[True][0], rtol=0, atol=1e-5)
+        np.testing.assert_array_equal(finals[True][0], finals[True][1])
+    finally:
+        jax.config.update("jax_enable_x64", old)
