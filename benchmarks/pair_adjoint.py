@@ -15,8 +15,10 @@ is one pass over each particle's own row with gathers only (no scatter):
     mbar_a = sum_b (P_a + P_b) F_ab r_ab . abar_b
     xbar_a = sum_b (P_a + P_b) [F_ab w_ab + G_ab (r_ab . w_ab) r_ab],   G = F'(r) / r.
 
-It prints the float64 agreement with autodiff and the float32 times of the forward and the
-gradient for the Taylor-Green vortex (default 100 x 100 particles).
+The forward is the package's own term (``pair_geometry``, ``pressure_acceleration``); only
+the adjoint is written here.  It prints the float64 agreement with autodiff and the float32
+times of the forward and the gradient for the Taylor-Green vortex (default 100 x 100
+particles).
 
     python benchmarks/pair_adjoint.py [--n-side 100]
 """
@@ -31,38 +33,23 @@ import jax.numpy as jnp
 
 
 def build(n_side: int):
+    """The Taylor-Green case, the package's pressure term (``pair_geometry`` and
+    ``fluid.momentum.pressure_acceleration``) and the same term with the hand adjoint."""
     import sphjax
-    from sphjax import integrate
-    from sphjax.space import displacement_fn, safe_norm
+    from sphjax import integrate, kernels
+    from sphjax.fluid.momentum import pressure_acceleration
+    from sphjax.neighbors import pair_geometry
+    from sphjax.space import displacement_fn
 
     case = sphjax.cases.taylor_green(n=n_side)
     model = case.model
     kernel, h, dim = model.kernel, model.smoothing_length, model.dim
-    if not hasattr(kernel, "shape_second_derivative") and type(kernel).__name__ != "QuinticSpline":
-        raise SystemExit("this prototype knows the second derivative of the quintic only")
     idx = integrate.build_neighbors(case.state, model).fluid.idx
-    valid = idx < idx.shape[0]
-    j = jnp.where(valid, idx, 0)
     displacement = displacement_fn(model.domain)
-    norm = kernel.normalisation(dim)
-
-    def geometry(x):
-        dr = displacement(x[:, None, :], x[j])
-        r = safe_norm(dr)
-        inside = valid & (r < model.cutoff) & (r > 0)
-        r_safe = jnp.where(inside, r, 1.0)
-        q = r_safe / h
-        F = jnp.where(inside, norm / h ** (dim + 1) * kernel.shape_derivative(q) / r_safe, 0.0)
-        return dr, r_safe, q, inside, F
 
     def pressure_term(x, rho, p, m):
-        dr, _, _, _, F = geometry(x)
-        P = p / rho**2
-        return -jnp.sum((m[j] * (P[:, None] + P[j]) * F)[..., None] * dr, axis=1)
-
-    def quintic_second_derivative(q):
-        pos = lambda y: jnp.maximum(y, 0.0)  # noqa: E731
-        return 20.0 * (pos(3.0 - q) ** 3 - 6.0 * pos(2.0 - q) ** 3 + 15.0 * pos(1.0 - q) ** 3)
+        pairs = pair_geometry(x, x, idx, displacement, model)
+        return pressure_acceleration(m, rho, p, pairs, 0.0)
 
     @jax.custom_vjp
     def pressure_term_hand(x, rho, p, m):
@@ -73,9 +60,16 @@ def build(n_side: int):
 
     def backward(residuals, abar):
         x, rho, p, m = residuals
-        dr, r_safe, q, inside, F = geometry(x)
-        second = norm / h ** (dim + 2) * quintic_second_derivative(q)
-        G = jnp.where(inside, (second - F) / r_safe**2, 0.0)
+        pairs = pair_geometry(x, x, idx, displacement, model)
+        j, dr = pairs.j, pairs.dr
+        inside = pairs.mask & (pairs.r > 0)
+        r = jnp.where(inside, pairs.r, 1.0)
+        # W'(r) and W''(r): the kernel's derivative and its derivative along r
+        first, second = jax.jvp(
+            lambda r: kernels.dW_dr(kernel, r, h, dim), (r,), (jnp.ones_like(r),)
+        )
+        F = jnp.where(inside, first / r, 0.0)
+        G = jnp.where(inside, (second - first / r) / r**2, 0.0)
         P = p / rho**2
         PP = P[:, None] + P[j]
         abar_b = abar[j]

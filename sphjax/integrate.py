@@ -225,9 +225,9 @@ def _run_steps(carry, n_steps: int, checkpoint_every: int | None, step_fn):
     return carry
 
 
-def _run_frames(
-    state, neighbors, failure, step, dt, params, *, model, save_every, n_frames, checkpoint_every
-):
+def _run_frames(carry, dt, params, *, model, save_every, n_frames, checkpoint_every):
+    """``n_frames`` frames of ``save_every`` steps from ``carry = (state, neighbors,
+    failure, step)``; returns the last carry and the frames' States."""
     step_fn = functools.partial(_step_with_checks, dt=dt, model=model, params=params)
 
     def frame(carry, _):
@@ -236,8 +236,7 @@ def _run_frames(
 
     # No checkpoint around a frame: its chunks already store only their first carry, and
     # one more level would replay the whole frame once more in reverse mode.
-    carry, frames = jax.lax.scan(frame, (state, neighbors, failure, step), None, length=n_frames)
-    return carry, frames
+    return jax.lax.scan(frame, carry, None, length=n_frames)
 
 
 _run_chunk = jax.jit(
@@ -346,30 +345,76 @@ def simulate(
     # otherwise be staged out and fail on a traced box size.
     with jax.ensure_compile_time_eval():
         neighbors = build_neighbors(neighbor_state, model)
-    failure = -jnp.ones(2, jnp.int32)
-    step = jnp.zeros((), jnp.int32)
-
     if traced:
-        neighbors = _update_neighbors(state.position, neighbors, model, rebuild=True)
-        state = evaluate(state, neighbors, model, params)
-        carry, frames = _run_frames(
+        states = _simulate_traced(
             state,
             neighbors,
-            failure,
-            step,
             dt,
             params,
-            model=model,
+            model,
             save_every=save_every,
             n_frames=n_frames,
             checkpoint_every=checkpoint_every,
         )
-        jax.debug.callback(_raise_overflow, _overflowed(carry[1]))
-        jax.debug.callback(_raise_failure, carry[2], dt)
-        states = _stack([_expand(state), frames])
-        times = jnp.arange(n_frames + 1) * (save_every * dt)
-        return Trajectory(states=states, times=times)
+    else:
+        states = _simulate_in_chunks(
+            state,
+            neighbors,
+            dt,
+            params,
+            model,
+            save_every=save_every,
+            n_frames=n_frames,
+            on_frames=on_frames,
+            progress=progress,
+            steps_per_chunk=steps_per_chunk,
+        )
+    times = jnp.arange(n_frames + 1) * (save_every * dt)
+    return Trajectory(states=states, times=times)
 
+
+def _initial_carry(state, neighbors):
+    """``(state, neighbors, failure, step)``: no failure recorded (-1, -1), step 0."""
+    return state, neighbors, -jnp.ones(2, jnp.int32), jnp.zeros((), jnp.int32)
+
+
+def _simulate_traced(
+    state, neighbors, dt, params, model, *, save_every, n_frames, checkpoint_every
+):
+    """One ``lax.scan`` (under grad/jit/vmap); overflow and instability are raised from
+    inside the computation.  Returns the frames, the initial one first."""
+    neighbors = _update_neighbors(state.position, neighbors, model, rebuild=True)
+    state = evaluate(state, neighbors, model, params)
+    carry, frames = _run_frames(
+        _initial_carry(state, neighbors),
+        dt,
+        params,
+        model=model,
+        save_every=save_every,
+        n_frames=n_frames,
+        checkpoint_every=checkpoint_every,
+    )
+    jax.debug.callback(_raise_overflow, _overflowed(carry[1]))
+    jax.debug.callback(_raise_failure, carry[2], dt)
+    return _stack([_expand(state), frames])
+
+
+def _simulate_in_chunks(
+    state,
+    neighbors,
+    dt,
+    params,
+    model,
+    *,
+    save_every,
+    n_frames,
+    on_frames,
+    progress,
+    steps_per_chunk,
+):
+    """Compiled chunks of at most ``steps_per_chunk`` steps with concrete checks between
+    them: a neighbour overflow re-allocates and repeats the chunk; an unstable run hands
+    the frames before the failure to ``on_frames`` and raises.  Returns the frames."""
     state = jax.jit(evaluate, static_argnames="model")(state, neighbors, model, params)
     bad = ~np.all(np.isfinite(np.asarray(state.acceleration)), axis=-1)
     if bad.any():
@@ -385,16 +430,14 @@ def simulate(
     if on_frames is not None:
         on_frames(all_frames[0], jnp.zeros(1))
     frames_per_chunk = max(1, steps_per_chunk // save_every)
+    carry = _initial_carry(state, neighbors)
     done = 0
     extra = 0  # neighbour slots added beyond the allocation's own estimate
     while done < n_frames:
         k = min(frames_per_chunk, n_frames - done)
         for _attempt in range(10):
-            carry, frames = _run_chunk(
-                state,
-                neighbors,
-                failure,
-                step,
+            new_carry, frames = _run_chunk(
+                carry,
                 dt,
                 params,
                 model=model,
@@ -402,22 +445,25 @@ def simulate(
                 n_frames=k,
                 checkpoint_every=None,
             )
-            if not bool(_overflowed(carry[1])):
+            if not bool(_overflowed(new_carry[1])):
                 break
+            state, neighbors, _, step = carry
             old = capacity(neighbors.fluid)
             # grow on every retry: the chunk's start positions may need less room than
             # the positions where it overflowed
             extra = max(extra + old // 2, 1)
             neighbors = build_neighbors(state, model, extra_capacity=extra)
+            carry = (state, neighbors, *carry[2:])
             warnings.warn(
                 f"neighbour list overflowed near step {int(step)}; re-allocated "
                 f"{old} -> {capacity(neighbors.fluid)} slots and repeated the chunk",
-                stacklevel=2,
+                stacklevel=3,
             )
         else:
             raise NeighborOverflowError(
                 "neighbour list kept overflowing; raise Model.neighbor_capacity"
             )
+        carry = new_carry
         frame_times = (done + 1 + jnp.arange(k)) * (save_every * dt)
         fail_step = int(carry[2][0])
         if fail_step >= 0:
@@ -429,12 +475,10 @@ def simulate(
         if on_frames is not None:
             on_frames(frames, frame_times)
         all_frames.append(frames)
-        state, neighbors, failure, step = carry
         done += k
         if progress is not None:
             progress(k * save_every)
-    times = jnp.arange(n_frames + 1) * (save_every * dt)
-    return Trajectory(states=_stack(all_frames), times=times)
+    return _stack(all_frames)
 
 
 def _check_finite(state: State) -> None:

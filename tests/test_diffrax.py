@@ -13,14 +13,6 @@ import sphjax
 from sphjax.diffrax_solver import diffeqsolve_case, state_of
 
 
-@pytest.fixture(autouse=True)
-def float64():
-    old = jax.config.jax_enable_x64
-    jax.config.update("jax_enable_x64", True)
-    yield
-    jax.config.update("jax_enable_x64", old)
-
-
 def kinetic_energy(state):
     return 0.5 * jnp.sum(state.mass[..., None] * state.velocity**2, axis=(-1, -2))
 

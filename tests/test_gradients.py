@@ -21,14 +21,6 @@ import sphjax
 from sphjax import Kind
 
 
-@pytest.fixture(autouse=True)
-def float64():
-    old = jax.config.jax_enable_x64
-    jax.config.update("jax_enable_x64", True)
-    yield
-    jax.config.update("jax_enable_x64", old)
-
-
 def kinetic_energy(state):
     return 0.5 * jnp.sum(state.mass[:, None] * state.velocity**2)
 

@@ -29,15 +29,6 @@ from sphjax.solid import (
 )
 from sphjax.state import Domain, Kind, Model, make_params, make_state
 
-
-@pytest.fixture(autouse=True)
-def _x64():
-    previous = jax.config.jax_enable_x64
-    jax.config.update("jax_enable_x64", True)
-    yield
-    jax.config.update("jax_enable_x64", previous)
-
-
 SPACING, H, CENTRE = 0.1, 0.12, 40  # 9 x 9 lattice, centre particle (VALIDATION.md)
 ROTATION = 0.3
 
