@@ -7,17 +7,20 @@ For a Taylor-Green vortex of ``n_side**2`` particles (float32 by default) this m
 * peak resident memory (``ru_maxrss``) of a fresh subprocess per configuration, with and
   without ``checkpoint_every``;
 * with ``--forward-mode``, the same derivative in forward mode (``jax.jacfwd``: one
-  tangent through the scan, nothing stored), the cheaper route for a few parameters.
+  tangent through the scan, nothing stored), the cheaper route for a few parameters;
+* with ``--autodiff-steps``, reverse mode with JAX's own adjoint of the fluid rates
+  (``Model.pair_adjoint=False``) instead of the hand-derived one
+  (:mod:`sphjax.fluid.adjoint`), for comparison.
 
 Each configuration runs in its own subprocess, so the peak RSS belongs to it alone.
 
     python benchmarks/gradients.py --n-side 100 --steps 1000 4000 --checkpoint 50 0 \
-        --steps-no-checkpoint 20 40 --forward-mode
+        --forward-mode --autodiff-steps 1000
     python benchmarks/gradients.py --one 100 1000 50     # a single configuration (internal)
 
-``--checkpoint 0`` means no rematerialisation (every step's residuals are stored); at
-10k particles that needs tens of GB for a thousand steps, so run it at fewer steps
-(``--steps-no-checkpoint``).
+``--checkpoint 0`` means ``checkpoint_every=None``: every step's input carry is kept, so
+memory grows with the number of steps (about 16 GB at 4000 steps of 10k particles);
+``--steps-no-checkpoint`` runs it at other step counts.
 """
 
 from __future__ import annotations
@@ -43,6 +46,9 @@ def run_one(
     import sphjax
 
     case = sphjax.cases.taylor_green(n=n_side)
+    if mode == "autodiff":
+        # reverse mode with JAX's own adjoint of the fluid rates instead of the hand one
+        case = case.replace(model=case.model.replace(pair_adjoint=False))
     checkpoint_every = checkpoint or None
 
     def loss(nu):
@@ -53,7 +59,7 @@ def run_one(
         return 0.5 * jnp.sum(final.mass[:, None] * final.velocity**2)
 
     nu = jnp.asarray(case.params.kinematic_viscosity)
-    derivative = jax.grad(loss) if mode == "reverse" else jax.jacfwd(loss)
+    derivative = jax.jacfwd(loss) if mode == "forward" else jax.grad(loss)
     out = dict(particles=case.n_particles, n_steps=n_steps, checkpoint_every=checkpoint, mode=mode)
     for name, fn in (("forward", loss), ("grad", derivative)):
         t0 = time.perf_counter()
@@ -82,6 +88,8 @@ def _configurations(args):
     if args.forward_mode:
         for n_steps in args.steps:
             yield "forward", n_steps, 0
+    for n_steps in args.autodiff_steps or ():
+        yield "autodiff", n_steps, next((c for c in args.checkpoint if c), 0)
 
 
 def main(argv=None):
@@ -107,11 +115,19 @@ def main(argv=None):
         action="store_true",
         help="also time the derivative in forward mode (jax.jacfwd) at each of --steps",
     )
+    parser.add_argument(
+        "--autodiff-steps",
+        type=int,
+        nargs="+",
+        default=None,
+        help="also time reverse mode with autodiff's adjoint of the fluid rates "
+        "(Model.pair_adjoint=False) at these step counts, with the first non-zero --checkpoint",
+    )
     parser.add_argument("--repeat", type=int, default=1)
     parser.add_argument("--x64", action="store_true", help="float64 instead of float32")
     parser.add_argument("--json", default=None, help="append results to this JSON-lines file")
     parser.add_argument("--one", type=int, nargs=3, metavar=("N_SIDE", "STEPS", "CKPT"))
-    parser.add_argument("--mode", choices=("reverse", "forward"), default="reverse")
+    parser.add_argument("--mode", choices=("reverse", "forward", "autodiff"), default="reverse")
     args = parser.parse_args(argv)
 
     if args.one:

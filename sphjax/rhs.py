@@ -15,6 +15,7 @@ import jax.numpy as jnp
 
 from sphjax import kernels
 from sphjax.boundary.wall import wall_pressure, wall_velocity
+from sphjax.fluid import adjoint as hand_adjoint
 from sphjax.fluid.density import continuity_density_rate, summation_density
 from sphjax.fluid.density_diffusion import molteni_density_diffusion
 from sphjax.fluid.eos import tait_density, tait_pressure
@@ -92,8 +93,19 @@ def fluid_rates(state: State, idx, model: Model, params: Params, density_step=No
     Returns ``(acceleration, density_rate, density, pressure, shift_acceleration)``.
 
     Rows of non-fluid particles are zero in ``acceleration`` and ``density_rate``; wall
-    rows of ``density`` and ``pressure`` hold the Adami extrapolation.
+    rows of ``density`` and ``pressure`` hold the Adami extrapolation.  Models that
+    :func:`sphjax.fluid.adjoint.supports` go through :func:`sphjax.fluid.adjoint.fluid_rates`
+    (the same terms with a hand-derived adjoint) unless ``model.pair_adjoint`` is off.
     """
+    if model.pair_adjoint and hand_adjoint.supports(model):
+        delta_v = None
+        if model.transport_velocity and density_step is not None:
+            delta_v = 0.5 * density_step * state.shift_acceleration
+        acceleration, shift, density, pressure = hand_adjoint.fluid_rates(
+            state.position, state.velocity, state.mass, delta_v, params, idx, model
+        )
+        acceleration = acceleration + params.gravity
+        return acceleration, jnp.zeros_like(density), density, pressure, shift
     h, dim = model.smoothing_length, model.dim
     displacement = displacement_fn(model.domain)
     pairs = pair_geometry(state.position, state.position, idx, displacement, model)
