@@ -118,14 +118,21 @@ def _perturbed_taylor_green(n, **model_changes):
 
 
 @pytest.mark.parametrize(
-    "model_changes",
-    [{}, {"transport_velocity": False}, {"physical_viscosity": False}],
-    ids=["taylor_green", "no_transport_velocity", "no_viscosity"],
+    ("model_changes", "block"),
+    [
+        ({}, 2048),
+        ({}, 50),
+        ({"transport_velocity": False}, 2048),
+        ({"physical_viscosity": False}, 2048),
+    ],
+    ids=["taylor_green", "blocks_of_50", "no_transport_velocity", "no_viscosity"],
 )
-def test_hand_adjoint_equals_autodiff(model_changes):
+def test_hand_adjoint_equals_autodiff(model_changes, block, monkeypatch):
     """``sphjax.fluid.adjoint``: the hand-derived adjoint of the fluid rates gives the
     same gradients as JAX's autodiff (``Model.pair_adjoint=False``) w.r.t. every Param and
-    the initial State, through 20 steps with checkpointing, to round-off (float64)."""
+    the initial State, through 20 steps with checkpointing, to round-off (float64).
+    144 particles: one block, or blocks of 50 (the last one padded)."""
+    monkeypatch.setattr(adjoint, "_BLOCK", block)
     case, state, params = _perturbed_taylor_green(12, **model_changes)
     assert adjoint.supports(case.model)
 

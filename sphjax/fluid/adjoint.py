@@ -1,32 +1,37 @@
 """Fluid rates with a hand-derived adjoint: reverse mode without scatters.
 
 Autodiff transposes every neighbour gather ``q[j]`` of a pair sum into a scatter-add and
-stores or recomputes a dozen per-pair intermediates; on the CPU the reverse pass of a
-step then costs about twice its forward.  For a neighbour list that is symmetric
-(``b`` in ``N(a)`` iff ``a`` in ``N(b)``, true of the full lists used here) the adjoint of
-a pair sum can instead be written per particle ``k`` over its own row, gathering only
-per-particle arrays (``abar_b``, ``m_b``, ...).  With the pair vector ``r_kb = x_k - x_b``,
-``F = W'(r) / r``, ``G = F'(r) / r`` and, for output cotangents ``abar`` (acceleration),
-``sbar`` (shift) and ``rhobar``, the pair weights ``w_kb = m_k abar_b - m_b abar_k``,
-``u_kb = m_k sbar_b - m_b sbar_k``:
+writes a dozen per-pair intermediates ``[N, K]`` to memory; on the CPU the reverse pass of
+a step then costs about twice its forward.  For a neighbour list that is symmetric (``b``
+in ``N(a)`` iff ``a`` in ``N(b)``, true of the full lists used here) the adjoint of a pair
+sum can instead be written per particle ``k`` over its own row, gathering only
+per-particle arrays (``abar_b``, ``m_b``, ...), and evaluated in blocks of particles
+whose per-pair arrays stay in cache.  With the pair vector ``r_kb = x_k - x_b``,
+``F = W'(r) / r``, ``G = F'(r) / r``, the output cotangents ``abar`` (acceleration),
+``sbar`` (shift acceleration) and ``rhobar`` (density), and the pair weights
+``w_kb = m_k abar_b - m_b abar_k``, ``ws_kb = m_k sbar_b - m_b sbar_k``:
 
-* density, eq. 5, ``rho_a = sum_b m_b W_ab``:
+* density, eq. 5, ``rho_a = m_a W(0) + sum_b m_b W_ab``:
   ``xbar_k = sum_b F r_kb (rhobar_k m_b + rhobar_b m_k)``, ``mbar_k = sum_b rhobar_b W_kb``;
-* pressure and transport stress (eq. 10 and Adami et al. 2013) as one matrix term
-  ``a_a = sum_b m_b (C_a + C_b) F r_ab`` with ``C = -p / rho^2 I + v dv^T / rho``:
-  ``Cbar_k = -sum_b F w_kb r_kb^T``, ``mbar_k = -sum_b F abar_b . (C_k + C_b) r_kb``,
+* pressure (eq. 10) and the transport stress of Adami, Hu & Adams (2013) as one term
+  ``a_a = sum_b m_b (C_a + C_b) F r_ab`` with ``C = -P I + u dv^T``, ``P = p / rho^2``,
+  ``u = v / rho``, ``dv`` the transport velocity minus the velocity:
+  ``Pbar_k = sum_b F r_kb . w_kb``, ``ubar_k = -sum_b F (r_kb . dv_k) w_kb``,
+  ``dvbar_k = -sum_b F (w_kb . u_k) r_kb``, ``mbar_k = -sum_b F abar_b . (C_k + C_b) r_kb``,
   ``xbar_k = -sum_b [F c + G (r_kb . c) r_kb]`` with ``c = (C_k + C_b)^T w_kb``;
-* the transport-velocity shift, ``s_a = -sum_b m_b (Q_a + Q_b) F r_ab``, ``Q = p_b / rho^2``:
-  the same with ``C = -Q I`` and ``u`` for ``w``;
-* Morris viscosity, ``a_a = sum_b m_b (B_a + B_b) H(r) v_ab``, ``B = nu / rho``,
-  ``H = F r^2 / (r^2 + eta^2)``: ``vbar_k = -sum_b (B_k + B_b) H w_kb``,
+* the transport-velocity shift ``s_a = -sum_b m_b (Q_a + Q_b) F r_ab``, ``Q = p_b / rho^2``:
+  ``Qbar_k = sum_b F r_kb . ws_kb``, ``mbar_k = sum_b (Q_k + Q_b) F r_kb . sbar_b``,
+  ``xbar_k = sum_b (Q_k + Q_b) [F ws_kb + G (r_kb . ws_kb) r_kb]``;
+* Morris viscosity ``a_a = sum_b m_b (B_a + B_b) H(r) v_ab``, ``B = nu / rho``,
+  ``H = F r^2 / (r^2 + 0.01 h^2)``: ``vbar_k = -sum_b (B_k + B_b) H w_kb``,
   ``Bbar_k = -sum_b H v_kb . w_kb``, ``mbar_k = -sum_b (B_k + B_b) H abar_b . v_kb``,
   ``xbar_k = -sum_b (B_k + B_b) (H'/r) (v_kb . w_kb) r_kb``.
 
-The per-particle maps between (the equation of state, ``C``, ``B``, ``Q``) are
-differentiated by JAX.  Forward mode stays JAX's own (:func:`sphjax._linear_call.custom_adjoint`).
-Used for fluid-only models with summation density and no artificial viscosity or density
-diffusion (``supports``); ``tests/test_gradients.py`` checks it against autodiff.
+The per-particle maps in between (eq. 12 and ``P``, ``u``, ``B``, ``Q``) are
+differentiated by JAX, and so is forward mode (:func:`sphjax._linear_call.custom_adjoint`).
+The forward is the package's own terms.  Used for fluid-only models with summation
+density and no artificial viscosity or density diffusion (:func:`supports`) unless
+``Model.pair_adjoint`` is off; ``tests/test_gradients.py`` checks it against autodiff.
 """
 
 from __future__ import annotations
@@ -119,8 +124,8 @@ def _forward(model, stress, position, velocity, mass, delta_v, *rest):
     return acceleration, shift, density, pressure
 
 
-def _rowwise(fn, rows, block=_BLOCK):
-    """``fn`` over blocks of ``block`` particles (rows) with ``lax.map``.
+def _rowwise(fn, rows):
+    """``fn`` over blocks of ``_BLOCK`` particles (rows) with ``lax.map``.
 
     Each block's per-pair arrays (``[block, K]``) stay in cache; over all particles at
     once they would be written to and read from memory between XLA's loop fusions, which
@@ -129,7 +134,7 @@ def _rowwise(fn, rows, block=_BLOCK):
     index ``N`` (no neighbours).
     """
     n = rows[0].shape[0]
-    block = min(block, n)
+    block = min(_BLOCK, n)
     n_blocks = -(-n // block)
     pad = n_blocks * block - n
 
