@@ -267,9 +267,9 @@ class Model:
       pair_adjoint: reverse mode through the fluid rates uses the hand-derived adjoint of
         :mod:`sphjax.fluid.adjoint` where it covers the model (fluid only, summation
         density, no artificial viscosity or density diffusion): gradients ~1.5x faster
-        than with autodiff's transpose.  It gives first derivatives only; set ``False`` for second
-        derivatives (``jax.hessian``) through a simulation, and for forward mode only
-        (``jax.jvp``/``jacfwd``), which is ~10 % faster without it.
+        than with autodiff's transpose.  It gives first derivatives only; set ``False``
+        for second derivatives (``jax.hessian``) through a simulation, and for work in
+        forward mode only (``jax.jvp``, ``jacfwd``), which is ~10 % faster without it.
     """
 
     dim: int
