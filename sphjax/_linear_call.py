@@ -9,7 +9,8 @@ with ``adjoint`` as the transpose, so forward mode is autodiff and reverse mode
 registered here: both the linear function and its transpose are vmapped.
 
 First derivatives only: ``linear_call`` has no derivative with respect to its residuals,
-so second derivatives through ``custom_adjoint`` functions are not available.
+so second derivatives through ``custom_adjoint`` functions are not available; asking for
+one raises a ``NotImplementedError`` that names ``Model(pair_adjoint=False)``.
 """
 
 from __future__ import annotations
@@ -20,7 +21,7 @@ import jax
 import jax.numpy as jnp
 from jax._src.core import jaxpr_as_fun
 from jax._src.custom_derivatives import linear_call_p
-from jax._src.interpreters import batching
+from jax._src.interpreters import ad, batching
 from jax.custom_derivatives import SymbolicZero, linear_call
 
 
@@ -58,6 +59,25 @@ def _batch_linear_call(vals, dims, *, callee, transpose_thunk, num_callee_consts
 
 
 batching.primitive_batchers[linear_call_p] = _batch_linear_call
+
+_linear_call_jvp = ad.primitive_jvps[linear_call_p]
+
+
+def _jvp_linear_call_or_explain(primals, tangents, **params):
+    """JAX's JVP of ``linear_call``, which asserts that the residuals carry no tangent;
+    a second derivative through a ``custom_adjoint`` function would, so say so."""
+    n_fixed = params["num_callee_consts"] + params["num_res"]
+    if not all(type(t) is ad.Zero for t in tangents[:n_fixed]):
+        raise NotImplementedError(
+            "second derivatives (e.g. jax.hessian, jvp of grad) through sphjax's "
+            "hand-derived adjoint of the fluid rates are not available; build the case "
+            "with Model(pair_adjoint=False), e.g. "
+            "case.replace(model=case.model.replace(pair_adjoint=False))"
+        )
+    return _linear_call_jvp(primals, tangents, **params)
+
+
+ad.primitive_jvps[linear_call_p] = _jvp_linear_call_or_explain
 
 
 def custom_adjoint(fun: Callable, adjoint: Callable, n_linear: int) -> Callable:

@@ -334,7 +334,7 @@ def simulate(
         raise ValueError(f"checkpoint_every must be a positive integer, got {checkpoint_every}")
     n_frames = n_steps // save_every
     traced = _is_traced(params, state, dt)
-    if not _is_traced(params, state) and not _is_traced(dt):
+    if not traced:
         _check_finite(state)
         check_time_step(float(dt), state, model, params)
         _check_inside(state, model)
@@ -346,29 +346,15 @@ def simulate(
     with jax.ensure_compile_time_eval():
         neighbors = build_neighbors(neighbor_state, model)
     if traced:
-        states = _simulate_traced(
-            state,
-            neighbors,
-            dt,
-            params,
-            model,
-            save_every=save_every,
-            n_frames=n_frames,
-            checkpoint_every=checkpoint_every,
-        )
+        run = functools.partial(_simulate_traced, checkpoint_every=checkpoint_every)
     else:
-        states = _simulate_in_chunks(
-            state,
-            neighbors,
-            dt,
-            params,
-            model,
-            save_every=save_every,
-            n_frames=n_frames,
+        run = functools.partial(
+            _simulate_in_chunks,
             on_frames=on_frames,
             progress=progress,
             steps_per_chunk=steps_per_chunk,
         )
+    states = run(state, neighbors, dt, params, model, save_every=save_every, n_frames=n_frames)
     times = jnp.arange(n_frames + 1) * (save_every * dt)
     return Trajectory(states=states, times=times)
 

@@ -316,6 +316,8 @@ class Model:
         )
         if not self.neighbor_capacity >= 1.0:
             raise ValueError("Model.neighbor_capacity must be >= 1")
+        if not isinstance(self.pair_adjoint, bool):
+            raise ValueError(f"Model.pair_adjoint must be True or False, got {self.pair_adjoint!r}")
 
     @property
     def cutoff(self) -> float:

@@ -41,6 +41,12 @@ def test_bad_resolution(name, n):
         sphjax.cases.get(name, n=n)
 
 
+@pytest.mark.parametrize("value", ["no", 0, None])
+def test_pair_adjoint_must_be_a_bool(tg, value):
+    with pytest.raises(ValueError, match="Model.pair_adjoint must be True or False"):
+        tg.model.replace(pair_adjoint=value)
+
+
 @pytest.mark.parametrize("dx", [0.0, -0.1, float("nan"), float("inf")])
 def test_non_positive_spacing(dx):
     with pytest.raises(ValueError, match="^dx must be a positive number"):

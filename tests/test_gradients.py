@@ -196,6 +196,25 @@ def test_hand_adjoint_under_forward_mode_and_vmap():
     assert float(reverse[1]) != pytest.approx(float(reverse[0]), rel=1e-3)
 
 
+def test_second_derivative_through_hand_adjoint_names_the_switch():
+    """``jax.hessian`` through the hand adjoint is refused with an error that names
+    ``Model(pair_adjoint=False)``; with it off, the second derivative is finite."""
+    case = sphjax.cases.taylor_green(n=6)
+
+    def loss_for(case):
+        def loss(nu):
+            params = case.params.replace(kinematic_viscosity=nu)
+            return kinetic_energy(sphjax.simulate(case, params, n_steps=3).final)
+
+        return loss
+
+    nu0 = case.params.kinematic_viscosity
+    with pytest.raises(NotImplementedError, match="pair_adjoint=False"):
+        jax.hessian(loss_for(case))(nu0)
+    autodiff = case.replace(model=case.model.replace(pair_adjoint=False))
+    assert np.isfinite(float(jax.hessian(loss_for(autodiff))(nu0)))
+
+
 # ----------------------------------------------------------------- no NaN gradients
 
 
