@@ -2,82 +2,101 @@
 
 ``jax.custom_vjp`` functions cannot be used in forward mode (``jax.jvp``, ``jacfwd``),
 and a ``jax.custom_jvp`` rule is transposed by autodiff.  ``custom_adjoint(f, adjoint)``
-gives both: its JVP is ``jax.jvp(f)`` wrapped in ``jax.custom_derivatives.linear_call``
-with ``adjoint`` as the transpose, so forward mode is autodiff and reverse mode
-(``grad``, ``vjp``) calls ``adjoint``.  JAX 0.10 has no batching rule for the
-``linear_call`` primitive (``jax.vmap`` of ``jacfwd`` or of ``grad`` would fail); one is
-registered here: both the linear function and its transpose are vmapped.
+gives both: its JVP is ``jax.jvp(f)`` wrapped in the public
+``jax.custom_derivatives.linear_call`` with ``adjoint`` as the transpose, so forward mode is
+autodiff and reverse mode (``grad``, ``vjp``) calls ``adjoint``.
 
-First derivatives only: ``linear_call`` has no derivative with respect to its residuals,
-so second derivatives through ``custom_adjoint`` functions are not available; asking for
-one raises a ``NotImplementedError`` that names ``Model(pair_adjoint=False)``.
+``jax.vmap`` of such a function in forward mode (``jacfwd`` is a vmapped ``jvp``) needs a
+batching rule for ``linear_call``, which JAX up to 0.10 does not have.  The one private
+hook sphjax uses is isolated here: on first use, and only for the JAX versions it was
+tested with (:data:`TESTED_JAX`), a batching rule is *added* for that primitive if JAX has
+none (no existing rule is replaced; programs that do not call ``linear_call`` are not
+affected).  For any other JAX version, or if the hook cannot be installed,
+``custom_adjoint`` returns ``f`` unchanged: plain autodiff, slower in reverse mode, same
+results.
+
+First derivatives only: ``linear_call`` has no derivative with respect to its residuals;
+asking for a second derivative raises a ``NotImplementedError`` that names
+``Model(pair_adjoint=False)``.
 """
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Callable
 
 import jax
 import jax.numpy as jnp
-from jax._src.core import jaxpr_as_fun
-from jax._src.custom_derivatives import linear_call_p
-from jax._src.interpreters import ad, batching
 from jax.custom_derivatives import SymbolicZero, linear_call
 
+#: (major, minor) JAX versions the batching hook was tested with
+TESTED_JAX = ((0, 10),)
 
-def _batch_linear_call(vals, dims, *, callee, transpose_thunk, num_callee_consts, num_res):
-    """``vmap`` of ``linear_call``: the batched call of the vmapped function and transpose.
-
-    Linear arguments are broadcast to the batch (so the transpose's outputs, batched,
-    match them); residuals keep their own batching.
-    """
-    size = next(v.shape[d] for v, d in zip(vals, dims, strict=True) if d is not None)
-    n_fixed = num_callee_consts + num_res
-    vals = [v if d is None else jnp.moveaxis(v, d, 0) for v, d in zip(vals, dims, strict=True)]
-    fixed, linear = vals[:n_fixed], vals[n_fixed:]
-    fixed_axes = [None if d is None else 0 for d in dims[:n_fixed]]
-    linear = [
-        v if d is not None else jnp.broadcast_to(v, (size, *v.shape))
-        for v, d in zip(linear, dims[n_fixed:], strict=True)
-    ]
-    transpose, transpose_consts = transpose_thunk()
-
-    def batched_callee(fixed, linear):
-        fn = jaxpr_as_fun(callee)
-        return jax.vmap(lambda f, x: fn(*f, *x), in_axes=(fixed_axes, 0))(fixed, linear)
-
-    def batched_transpose(fixed, cotangents):
-        fn = jaxpr_as_fun(transpose)
-        residuals = fixed[num_callee_consts:]
-        return jax.vmap(
-            lambda r, c: fn(*transpose_consts, *r, *c),
-            in_axes=(fixed_axes[num_callee_consts:], 0),
-        )(residuals, cotangents)
-
-    out = linear_call(batched_callee, batched_transpose, list(fixed), list(linear))
-    return out, [0] * len(out)
+_HIGHER_ORDER_TRACERS = ("JVPTracer", "LinearizeTracer")
 
 
-batching.primitive_batchers[linear_call_p] = _batch_linear_call
+def _jax_version() -> tuple[int, int]:
+    major, minor = (
+        int("".join(c for c in p if c.isdigit()) or 0) for p in jax.__version__.split(".")[:2]
+    )
+    return major, minor
 
-_linear_call_jvp = ad.primitive_jvps[linear_call_p]
+
+@functools.cache
+def hook_installed() -> bool:
+    """Install the ``linear_call`` batching rule if this JAX lacks one; False if unavailable."""
+    if _jax_version() not in TESTED_JAX:
+        return False
+    try:
+        from jax._src.core import jaxpr_as_fun
+        from jax._src.custom_derivatives import linear_call_p
+        from jax._src.interpreters import batching
+    except ImportError:
+        return False
+    if linear_call_p in getattr(batching, "fancy_primitive_batchers", {}):
+        return True
+
+    def batch_linear_call(vals, dims, *, callee, transpose_thunk, num_callee_consts, num_res):
+        """``vmap`` of ``linear_call``: vmap both the function and its transpose.  Linear
+        arguments are broadcast to the batch (so the transpose's batched outputs match)."""
+        size = next(v.shape[d] for v, d in zip(vals, dims, strict=True) if d is not None)
+        n_fixed = num_callee_consts + num_res
+        vals = [v if d is None else jnp.moveaxis(v, d, 0) for v, d in zip(vals, dims, strict=True)]
+        fixed, linear = vals[:n_fixed], vals[n_fixed:]
+        fixed_axes = [None if d is None else 0 for d in dims[:n_fixed]]
+        linear = [
+            v if d is not None else jnp.broadcast_to(v, (size, *v.shape))
+            for v, d in zip(linear, dims[n_fixed:], strict=True)
+        ]
+        transpose, transpose_consts = transpose_thunk()
+
+        def batched_callee(fixed, linear):
+            fn = jaxpr_as_fun(callee)
+            return jax.vmap(lambda f, x: fn(*f, *x), in_axes=(fixed_axes, 0))(fixed, linear)
+
+        def batched_transpose(fixed, cotangents):
+            fn = jaxpr_as_fun(transpose)
+            residuals = fixed[num_callee_consts:]
+            return jax.vmap(
+                lambda r, c: fn(*transpose_consts, *r, *c),
+                in_axes=(fixed_axes[num_callee_consts:], 0),
+            )(residuals, cotangents)
+
+        out = linear_call(batched_callee, batched_transpose, list(fixed), list(linear))
+        return out, [0] * len(out)
+
+    batching.primitive_batchers[linear_call_p] = batch_linear_call
+    return True
 
 
-def _jvp_linear_call_or_explain(primals, tangents, **params):
-    """JAX's JVP of ``linear_call``, which asserts that the residuals carry no tangent;
-    a second derivative through a ``custom_adjoint`` function would, so say so."""
-    n_fixed = params["num_callee_consts"] + params["num_res"]
-    if not all(type(t) is ad.Zero for t in tangents[:n_fixed]):
+def _refuse_second_order(primals):
+    if any(type(x).__name__ in _HIGHER_ORDER_TRACERS for x in jax.tree_util.tree_leaves(primals)):
         raise NotImplementedError(
-            "second derivatives (e.g. jax.hessian, jvp of grad) through sphjax's "
-            "hand-derived adjoint of the fluid rates are not available; build the case "
-            "with Model(pair_adjoint=False), e.g. "
+            "second derivatives (e.g. jax.hessian, jvp of grad) through sphjax's custom "
+            "adjoint of the pair sums are not available; build the case with "
+            "Model(pair_adjoint=False), e.g. "
             "case.replace(model=case.model.replace(pair_adjoint=False))"
         )
-    return _linear_call_jvp(primals, tangents, **params)
-
-
-ad.primitive_jvps[linear_call_p] = _jvp_linear_call_or_explain
 
 
 def custom_adjoint(fun: Callable, adjoint: Callable, n_linear: int) -> Callable:
@@ -89,13 +108,19 @@ def custom_adjoint(fun: Callable, adjoint: Callable, n_linear: int) -> Callable:
       adjoint: ``adjoint(args, cotangent) -> tuple`` of cotangents of the first
         ``n_linear`` arguments, ``args`` being all arguments of ``fun``.
       n_linear: number of differentiable leading arguments.
+    Returns:
+      ``fun`` with the adjoint attached, or ``fun`` itself where the JAX version does not
+      support the hook (see the module docstring).
     """
+    if not hook_installed():
+        return fun
 
     @jax.custom_jvp
     def wrapped(*args):
         return fun(*args)
 
     def _jvp(primals, tangents):
+        _refuse_second_order(primals)
         # only the non-zero tangents are linear arguments: the transpose of linear_call
         # needs all of them to be unknowns of the linearisation
         active = [not isinstance(t, SymbolicZero) for t in tangents[:n_linear]]

@@ -37,7 +37,7 @@ import jax.numpy as jnp
 import optax
 from jax.flatten_util import ravel_pytree
 
-from sphjax.state import Params
+from sphjax.core.params import Params
 
 TRANSFORMS = {
     "log": (jnp.log, jnp.exp),

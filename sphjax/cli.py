@@ -177,7 +177,7 @@ def _build_case(args):
 
 def _plan(case, args) -> tuple[float, int, int]:
     """Time step, number of steps and save interval, checked before anything runs."""
-    from sphjax.timestep import check_time_step
+    from sphjax.integration.timestep import check_time_step
 
     dt = case.dt if args.dt is None else args.dt
     if args.dt is not None:
@@ -219,7 +219,7 @@ def cmd_run(args) -> int:
 def _run(args, out: Path) -> int:
     from tqdm import tqdm
 
-    from sphjax.integrate import NeighborOverflowError, SimulationError, simulate
+    from sphjax.integration.simulate import NeighborOverflowError, SimulationError, simulate
     from sphjax.io import TrajectoryWriter
 
     case = _build_case(args)
@@ -289,8 +289,8 @@ def _run(args, out: Path) -> int:
 def cmd_plot(args) -> int:
     import numpy as np
 
+    from sphjax.core.state import Kind
     from sphjax.io import check_writable, read_metadata, read_trajectory
-    from sphjax.state import Kind
 
     try:
         out = check_writable(args.out, "--out")

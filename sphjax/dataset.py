@@ -39,11 +39,12 @@ import jax.numpy as jnp
 import numpy as np
 
 from sphjax import cases as cases_module
-from sphjax.case import Case
-from sphjax.integrate import simulate
-from sphjax.space import minimum_image
-from sphjax.state import Kind, Params, State
-from sphjax.timestep import check_time_step, stable_time_step
+from sphjax.core.case import Case
+from sphjax.core.params import Params
+from sphjax.core.space import minimum_image
+from sphjax.core.state import Kind, State
+from sphjax.integration.simulate import simulate
+from sphjax.integration.timestep import check_time_step, stable_time_step
 
 SPLITS = ("train", "valid", "test")
 MARKER = "INCOMPLETE"

@@ -34,10 +34,11 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from sphjax.case import Case
-from sphjax.integrate import Trajectory
-from sphjax.kernels import KERNELS
-from sphjax.state import Params, State
+from sphjax.core.case import Case
+from sphjax.core.kernels import KERNELS
+from sphjax.core.params import Params
+from sphjax.core.state import State
+from sphjax.integration.simulate import Trajectory
 
 FORMAT = "sphjax-trajectory"
 FORMAT_VERSION = 1

@@ -11,8 +11,8 @@ import jax
 import pytest
 
 import sphjax
-import sphjax.integrate
-import sphjax.timestep
+import sphjax.integration.simulate
+import sphjax.integration.timestep
 from sphjax.cli import main
 from sphjax.io import read_trajectory
 

@@ -10,7 +10,7 @@ import jax.numpy as jnp
 import pytest
 
 import sphjax
-from sphjax.diffrax_solver import diffeqsolve_case, state_of
+from sphjax.integration.diffrax import diffeqsolve_case, state_of
 
 
 def kinetic_energy(state):

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 import sphjax
-import sphjax.integrate
+import sphjax.integration.simulate
 from sphjax.io import TrajectoryWriter, check_writable, read_trajectory
 
 

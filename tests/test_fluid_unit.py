@@ -6,9 +6,8 @@ import numpy as np
 import pytest
 
 import sphjax
-from sphjax import Kind
-from sphjax.fluid.eos import tait_density, tait_pressure
-from sphjax.integrate import build_neighbors, kick_drift_kick
+from sphjax import Kind, build_neighbors, kick_drift_kick
+from sphjax.physics.fluid.eos import tait_density, tait_pressure
 
 
 def test_tait_equation_of_state_and_inverse():
@@ -21,8 +20,8 @@ def test_tait_equation_of_state_and_inverse():
     np.testing.assert_allclose(tait_density(p, 1000.0, 20.0, 7.0, 100.0, 30.0), rho, rtol=1e-12)
 
 
-def _perturbed_periodic_case(n=10, seed=0, **model_changes):
-    case = sphjax.cases.taylor_green(n=n, artificial_alpha=0.1, density="continuity")
+def _perturbed_periodic_case(n=10, seed=0, **case_args):
+    case = sphjax.cases.taylor_green(n=n, artificial_alpha=0.1, density="continuity", **case_args)
     rng = np.random.default_rng(seed)
     dx = case.info["dx"]
     position = case.state.position + 0.2 * dx * rng.uniform(-1, 1, case.state.position.shape)
@@ -30,8 +29,7 @@ def _perturbed_periodic_case(n=10, seed=0, **model_changes):
     state = case.state.replace(
         position=jnp.mod(position, 1.0), velocity=velocity, reference_position=position
     )
-    model = case.model.replace(**model_changes)
-    return case.replace(state=state, model=model)
+    return case.replace(state=state)
 
 
 def test_two_particle_forces_are_equal_and_opposite():
@@ -39,10 +37,12 @@ def test_two_particle_forces_are_equal_and_opposite():
         dim=2,
         smoothing_length=0.1,
         domain=sphjax.Domain((0.0, 0.0), (1.0, 1.0), (True, True)),
-        density="continuity",
-        artificial_viscosity=True,
-        physical_viscosity=True,
-        particle_kinds=(Kind.FLUID,),
+        systems=(
+            sphjax.FluidSystem(
+                density=sphjax.ContinuityDensity(),
+                viscosity=(sphjax.ArtificialViscosity(), sphjax.MorrisViscosity()),
+            ),
+        ),
     )
     params = sphjax.make_params(
         2, reference_density=1.0, sound_speed=10.0, artificial_alpha=0.5, kinematic_viscosity=0.01

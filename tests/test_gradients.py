@@ -19,7 +19,6 @@ import pytest
 
 import sphjax
 from sphjax import Kind
-from sphjax.fluid import adjoint
 
 
 def kinetic_energy(state):
@@ -101,71 +100,87 @@ def test_grad_wrt_initial_positions_matches_jvp():
 # ----------------------------------------------------------------- hand adjoint
 
 
-def _perturbed_taylor_green(n, **model_changes):
-    """Taylor-Green with uneven masses, a velocity perturbation and non-zero pressure
-    offsets, so that every term of the hand adjoint is exercised."""
-    case = sphjax.cases.taylor_green(n=n)
-    case = case.replace(model=case.model.replace(**model_changes))
+def _perturbed(case):
+    """``case`` with uneven masses, a velocity perturbation and, for fluids, non-zero
+    pressure offsets, so that every term of the pair sums' adjoint is exercised."""
     s = case.state
     state = s.replace(
         mass=s.mass * (1.0 + 0.05 * jnp.sin(7.0 * s.position[:, 0])),
         velocity=s.velocity + 0.01 * jnp.cos(5.0 * s.position),
     )
-    params = case.params.replace(
-        background_pressure=jnp.asarray(0.3), reference_pressure=jnp.asarray(0.2)
-    )
+    params = case.params
+    if params.fluid is not None:
+        params = params.replace(background_pressure=0.3, reference_pressure=0.2)
     return case, state, params
 
 
-@pytest.mark.parametrize(
-    ("model_changes", "block"),
-    [
-        ({}, 2048),
-        ({}, 50),
-        ({"transport_velocity": False}, 2048),
-        ({"physical_viscosity": False}, 2048),
-    ],
-    ids=["taylor_green", "blocks_of_50", "no_transport_velocity", "no_viscosity"],
-)
-def test_hand_adjoint_equals_autodiff(model_changes, block, monkeypatch):
-    """``sphjax.fluid.adjoint``: the hand-derived adjoint of the fluid rates gives the
-    same gradients as JAX's autodiff (``Model.pair_adjoint=False``) w.r.t. every Param and
-    the initial State, through 20 steps with checkpointing, to round-off (float64).
-    144 particles: one block, or blocks of 50 (the last one padded)."""
-    monkeypatch.setattr(adjoint, "_BLOCK", block)
-    case, state, params = _perturbed_taylor_green(12, **model_changes)
-    assert adjoint.supports(case.model)
+def _perturbed_taylor_green(n, **case_args):
+    return _perturbed(sphjax.cases.taylor_green(n=n, **case_args))
+
+
+ADJOINT_CASES = {
+    "taylor_green": lambda: sphjax.cases.taylor_green(n=12),
+    "no_transport_velocity": lambda: sphjax.cases.taylor_green(n=12, transport_velocity=False),
+    "continuity_monaghan": lambda: sphjax.cases.taylor_green(
+        n=10, density="continuity", artificial_alpha=0.1
+    ),
+    "dam_break_walls_delta_sph": lambda: sphjax.cases.dam_break(n=4),
+    "free_slip_walls": lambda: sphjax.cases.dam_break(
+        n=4, wall_slip="free_slip", density_diffusion=None
+    ),
+    "poiseuille_morris_walls": lambda: sphjax.cases.poiseuille(n=6),
+    "plate_penalty": lambda: sphjax.cases.oscillating_plate(n=2, penalty_alpha=0.1),
+}
+
+
+@pytest.mark.parametrize("block", [2048, 50], ids=["one_block", "blocks_of_50"])
+@pytest.mark.parametrize("name", list(ADJOINT_CASES))
+def test_pair_adjoint_equals_autodiff(name, block):
+    """The custom adjoint of the pair sums (``Model.pair_adjoint``) gives the same
+    gradients as JAX's autodiff (``pair_adjoint=False``) w.r.t. every Param and the
+    initial State, through 10 steps with checkpointing, to round-off (float64): fluids
+    with summation and continuity density, transport velocity, Monaghan and Morris
+    viscosity, no-slip and free-slip walls, delta-SPH, and the solid with its penalty
+    force.  Blocks of 50 particles leave the last block padded."""
+    case, state, params = _perturbed(ADJOINT_CASES[name]())
+    if name != "taylor_green" and block == 50:
+        pytest.skip("blocks are exercised on Taylor-Green")
 
     def loss_for(pair_adjoint):
-        c = case.replace(model=case.model.replace(pair_adjoint=pair_adjoint))
+        model = case.model.replace(pair_adjoint=pair_adjoint, pair_block=block)
+        c = case.replace(model=model)
 
         def loss(params, state):
-            final = sphjax.simulate(c, params, state=state, n_steps=20, checkpoint_every=5).final
-            return (
-                kinetic_energy(final)
-                + jnp.sum(jnp.sin(final.position))
-                + 0.1 * jnp.sum(final.pressure**2)
-                + jnp.sum(final.density**3)
-            )
+            final = sphjax.simulate(c, params, state=state, n_steps=10, checkpoint_every=5).final
+            return kinetic_energy(final) + jnp.sum(jnp.sin(final.position))
 
         return jax.jit(jax.value_and_grad(loss, argnums=(0, 1), allow_int=True))
 
     (value_hand, grad_hand) = loss_for(True)(params, state)
     (value_auto, grad_auto) = loss_for(False)(params, state)
     assert float(value_hand) == pytest.approx(float(value_auto), rel=1e-13)
+    leaves = [
+        (jax.tree_util.keystr(path), auto, hand)
+        for (path, auto), hand in zip(
+            jax.tree_util.tree_leaves_with_path(grad_auto),
+            jax.tree_util.tree_leaves(grad_hand),
+            strict=True,
+        )
+        if auto.dtype.kind == "f"
+    ]
+    # leaves below 1e-6 of the largest are sums that cancel to round-off (e.g. d/d rho0
+    # of a periodic flow, 1e-21): their relative error measures noise, not the adjoint
+    largest = max(float(jnp.max(jnp.abs(auto))) for _, auto, _ in leaves)
     checked = 0
-    for (path, auto), hand in zip(
-        jax.tree_util.tree_leaves_with_path(grad_auto),
-        jax.tree_util.tree_leaves(grad_hand),
-        strict=True,
-    ):
-        if auto.dtype.kind != "f" or float(jnp.max(jnp.abs(auto))) == 0.0:
+    for name, auto, hand in leaves:
+        scale = float(jnp.max(jnp.abs(auto)))
+        if scale <= 1e-6 * largest:
             continue
-        error = float(jnp.max(jnp.abs(hand - auto)) / jnp.max(jnp.abs(auto)))
-        assert error < 1e-11, (jax.tree_util.keystr(path), error)
+        error = float(jnp.max(jnp.abs(hand - auto))) / scale
+        assert error < 1e-10, (name, error)
         checked += 1
-    # position, velocity, mass and the parameters of the fluid rates
-    assert checked >= 8
+    # position, velocity, mass and some parameters of the rates
+    assert checked >= 4
 
 
 def test_hand_adjoint_under_forward_mode_and_vmap():
@@ -270,7 +285,7 @@ def test_no_nan_gradients_at_coincident_particles_and_switches():
     assert float(jnp.max(jnp.abs(grads[1][:4]))) > 0  # the special particles do get gradients
 
     # one right-hand-side evaluation: the coincident and switch particles directly
-    from sphjax.integrate import build_neighbors
+    from sphjax.integration.simulate import build_neighbors
 
     neighbors = build_neighbors(state, case.model)
 
@@ -283,7 +298,7 @@ def test_no_nan_gradients_at_coincident_particles_and_switches():
 
 
 def test_inverse_equation_of_state_clip_has_finite_gradient():
-    from sphjax.fluid.eos import tait_density
+    from sphjax.physics.fluid.eos import tait_density
 
     rho0, c0, gamma = 1000.0, 10.0, 7.0
     stiffness = rho0 * c0**2 / gamma

@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from sphjax import kernels
-from sphjax.space import safe_norm
+from sphjax.core.space import safe_norm
 
 KERNELS = [
     kernels.CubicSpline(),

@@ -15,19 +15,26 @@ import numpy as np
 import pytest
 
 import sphjax
-from sphjax.case import Case
-from sphjax.kernels import CubicSpline, WendlandC2
-from sphjax.neighbors import reference_neighbors
-from sphjax.rhs import evaluate
-from sphjax.solid import (
+from sphjax import (
+    Case,
+    Domain,
+    Kind,
+    Model,
+    PenaltyForce,
+    SolidSystem,
+    build_neighbors,
+    evaluate,
+    make_params,
+    make_state,
+)
+from sphjax.core.kernels import CubicSpline, WendlandC2
+from sphjax.physics.rhs import update_stage
+from sphjax.physics.solid.material import (
     green_lagrange_strain,
     lame_constants,
     pk1_stress,
-    solid_acceleration,
-    solid_fields,
     st_venant_kirchhoff_stress,
 )
-from sphjax.state import Domain, Kind, Model, make_params, make_state
 
 SPACING, H, CENTRE = 0.1, 0.12, 40  # 9 x 9 lattice, centre particle (VALIDATION.md)
 ROTATION = 0.3
@@ -51,17 +58,23 @@ def _setup(n=9, dim=2, kernel=None, h=H, penalty=False, **params):
         smoothing_length=h,
         kernel=kernel,
         domain=Domain((-10.0,) * dim, (10.0,) * dim, (False,) * dim),
-        solid_penalty=penalty,
-        particle_kinds=(Kind.SOLID,),
+        systems=(SolidSystem(penalty=PenaltyForce() if penalty else None),),
     )
     # lambda = mu = 1  <=>  E = 2.5, nu = 0.25 (eq. 19)
     kw = dict(young_modulus=2.5, poisson_ratio=0.25, solid_density=1.0)
     kw.update(params)
     p = make_params(dim, **kw)
     state = make_state(X, 0.0, kw["solid_density"], kw["solid_density"] * SPACING**dim, Kind.SOLID)
-    members = jnp.arange(len(X))
-    idx = jnp.asarray(reference_neighbors(X, np.arange(len(X)), model))
-    return X, state, members, idx, model, p
+    return X, state, build_neighbors(state, model), model, p
+
+
+def solid_fields(state, neighbors, model, params):
+    """The solid's fields after the update stage (``L0``, ``F``, ``P``)."""
+    return update_stage(state, neighbors, model, params)[0]
+
+
+def solid_acceleration(state, neighbors, model, params):
+    return evaluate(state, neighbors, model, params).acceleration
 
 
 def _deform(state, X, A, shift=0.05):
@@ -84,15 +97,17 @@ def test_svk_stress_patch_numbers():
 
 
 def test_correction_matrix_is_identity_like_and_F_is_identity_undeformed():
-    X, state, members, idx, model, params = _setup()
-    fields = solid_fields(state, members, idx, model, params)
-    L0 = np.asarray(fields.L0)
+    X, state, nb, model, params = _setup()
+    fields = solid_fields(state, nb, model, params)
+    L0 = np.asarray(fields["L0"])
     # sign convention of eq. 15: L0 ~ +I in the bulk (exactly I only in the continuum)
     np.testing.assert_allclose(L0[CENTRE], np.eye(2), atol=0.02)
     assert np.all(np.linalg.eigvalsh(0.5 * (L0 + L0.transpose(0, 2, 1))) > 0)
     # F == I on the reference configuration, for every particle (surface included)
-    np.testing.assert_allclose(fields.F, np.broadcast_to(np.eye(2), fields.F.shape), atol=1e-12)
-    np.testing.assert_allclose(fields.P, 0.0, atol=1e-12)
+    np.testing.assert_allclose(
+        fields["F"], np.broadcast_to(np.eye(2), fields["F"].shape), atol=1e-12
+    )
+    np.testing.assert_allclose(fields["P"], 0.0, atol=1e-12)
 
 
 @pytest.mark.parametrize(
@@ -106,19 +121,19 @@ def test_correction_matrix_is_identity_like_and_F_is_identity_undeformed():
     ids=["stretch21", "stretch23", "rotation", "general"],
 )
 def test_patch_deformation_gradient(A):
-    X, state, members, idx, model, params = _setup()
-    fields = solid_fields(_deform(state, X, A), members, idx, model, params)
-    np.testing.assert_allclose(fields.F[CENTRE], A, atol=1e-10)
+    X, state, nb, model, params = _setup()
+    fields = solid_fields(_deform(state, X, A), nb, model, params)
+    np.testing.assert_allclose(fields["F"][CENTRE], A, atol=1e-10)
     # the correction makes F exact for every particle, the free surface included
-    np.testing.assert_allclose(fields.F, np.broadcast_to(A, fields.F.shape), atol=1e-10)
+    np.testing.assert_allclose(fields["F"], np.broadcast_to(A, fields["F"].shape), atol=1e-10)
 
 
 def test_patch_stress():
-    X, state, members, idx, model, params = _setup()
-    fields = solid_fields(_deform(state, X, np.diag([2.0, 3.0])), members, idx, model, params)
-    np.testing.assert_allclose(fields.P[CENTRE], np.diag([17.0, 40.5]), atol=1e-9)
-    fields = solid_fields(_deform(state, X, _rotation(ROTATION)), members, idx, model, params)
-    np.testing.assert_allclose(fields.P[CENTRE], 0.0, atol=1e-10)
+    X, state, nb, model, params = _setup()
+    fields = solid_fields(_deform(state, X, np.diag([2.0, 3.0])), nb, model, params)
+    np.testing.assert_allclose(fields["P"][CENTRE], np.diag([17.0, 40.5]), atol=1e-9)
+    fields = solid_fields(_deform(state, X, _rotation(ROTATION)), nb, model, params)
+    np.testing.assert_allclose(fields["P"][CENTRE], 0.0, atol=1e-10)
 
 
 def _interior(n, margin):
@@ -131,8 +146,8 @@ def test_patch_affine_interior_has_no_acceleration(A):
     # interior = particles whose neighbours' neighbourhoods are complete (2 supports,
     # i.e. 4 lattice steps from the edge): the centre of 9 x 9, a 5 x 5 block of 13 x 13
     for n in (9, 13):
-        X, state, members, idx, model, params = _setup(n=n)
-        acc = np.asarray(solid_acceleration(_deform(state, X, A), members, idx, model, params))
+        X, state, nb, model, params = _setup(n=n)
+        acc = np.asarray(solid_acceleration(_deform(state, X, A), nb, model, params))
         inner = _interior(n, 4)
         assert len(inner) == (n - 8) ** 2
         np.testing.assert_allclose(acc[inner], 0.0, atol=1e-9)
@@ -141,43 +156,45 @@ def test_patch_affine_interior_has_no_acceleration(A):
 
 
 def test_rotation_gives_no_acceleration_anywhere():
-    X, state, members, idx, model, params = _setup()
-    acc = solid_acceleration(_deform(state, X, _rotation(ROTATION)), members, idx, model, params)
+    X, state, nb, model, params = _setup()
+    acc = solid_acceleration(_deform(state, X, _rotation(ROTATION)), nb, model, params)
     np.testing.assert_allclose(acc, 0.0, atol=1e-10)
 
 
 def test_gravity_is_added():
-    X, state, members, idx, model, params = _setup(gravity=(0.0, -2.0))
-    acc = solid_acceleration(state, members, idx, model, params)
+    X, state, nb, model, params = _setup(gravity=(0.0, -2.0))
+    acc = solid_acceleration(state, nb, model, params)
     np.testing.assert_allclose(acc, np.broadcast_to([0.0, -2.0], acc.shape), atol=1e-12)
 
 
 def test_penalty_force_vanishes_for_affine_and_restores_a_kink():
-    X, state, members, idx, model, params = _setup(penalty=True, penalty_alpha=0.1)
-    _, _, _, _, plain, _ = _setup(penalty=False)
+    X, state, nb, model, params = _setup(penalty=True, penalty_alpha=0.1)
+    _, _, _, plain, _ = _setup(penalty=False)
     deformed = _deform(state, X, np.array([[1.3, 0.4], [-0.2, 0.8]]))
-    with_penalty = solid_acceleration(deformed, members, idx, model, params)
-    without = solid_acceleration(deformed, members, idx, plain, params)
+    with_penalty = solid_acceleration(deformed, nb, model, params)
+    without = solid_acceleration(deformed, nb, plain, params)
     np.testing.assert_allclose(with_penalty, without, atol=1e-10)
     # displace the centre particle: the penalty adds a force pulling it back
     kick = np.zeros_like(X)
     kick[CENTRE] = [0.01, 0.005]
     kinked = state.replace(position=jnp.asarray(X + kick))
-    extra = solid_acceleration(kinked, members, idx, model, params) - solid_acceleration(
-        kinked, members, idx, plain, params
+    extra = solid_acceleration(kinked, nb, model, params) - solid_acceleration(
+        kinked, nb, plain, params
     )
     assert float(jnp.dot(extra[CENTRE], kick[CENTRE])) < 0
     np.testing.assert_allclose(jnp.sum(extra, axis=0), 0.0, atol=1e-12)  # antisymmetric
 
 
 def test_3d_patch_and_undeformed():
-    X, state, members, idx, model, params = _setup(n=5, dim=3, kernel=WendlandC2(), h=0.13)
-    fields = solid_fields(state, members, idx, model, params)
-    np.testing.assert_allclose(fields.F, np.broadcast_to(np.eye(3), fields.F.shape), atol=1e-12)
+    X, state, nb, model, params = _setup(n=5, dim=3, kernel=WendlandC2(), h=0.13)
+    fields = solid_fields(state, nb, model, params)
+    np.testing.assert_allclose(
+        fields["F"], np.broadcast_to(np.eye(3), fields["F"].shape), atol=1e-12
+    )
     A = np.array([[1.2, 0.1, 0.0], [0.0, 0.9, 0.2], [0.1, 0.0, 1.1]])
-    fields = solid_fields(_deform(state, X, A), members, idx, model, params)
-    np.testing.assert_allclose(fields.F, np.broadcast_to(A, fields.F.shape), atol=1e-10)
-    acc = solid_acceleration(_deform(state, X, A), members, idx, model, params)
+    fields = solid_fields(_deform(state, X, A), nb, model, params)
+    np.testing.assert_allclose(fields["F"], np.broadcast_to(A, fields["F"].shape), atol=1e-10)
+    acc = solid_acceleration(_deform(state, X, A), nb, model, params)
     assert acc.shape == (len(X), 3) and bool(jnp.all(jnp.isfinite(acc)))
 
 
@@ -189,20 +206,20 @@ def test_clamped_particles_take_part_but_do_not_move():
         smoothing_length=H,
         kernel=CubicSpline(),
         domain=Domain((-10.0, -10.0), (10.0, 10.0), (False, False)),
-        particle_kinds=(Kind.SOLID, Kind.CLAMPED),
+        systems=(SolidSystem(),),
     )
     params = make_params(2, young_modulus=2.5, poisson_ratio=0.25, solid_density=1.0)
     state = make_state(X, 0.0, 1.0, SPACING**2, kind)
     moved = state.replace(position=state.position.at[:, 0].multiply(1.1))
-    nb = sphjax.integrate.build_neighbors(state, model)
+    nb = build_neighbors(state, model)
     out = evaluate(moved, nb, model, params)
     clamped = kind == Kind.CLAMPED
     np.testing.assert_array_equal(np.asarray(out.acceleration)[clamped], 0.0)
     assert np.abs(np.asarray(out.acceleration)[~clamped]).max() > 0
     # clamped F is computed from the same sums: a uniform stretch gives F = diag(1.1, 1)
-    fields = solid_fields(moved, nb.solid_members, nb.solid_idx, model, params)
+    fields = solid_fields(moved, nb, model, params)
     np.testing.assert_allclose(
-        fields.F, np.broadcast_to(np.diag([1.1, 1.0]), fields.F.shape), atol=1e-12
+        fields["F"], np.broadcast_to(np.diag([1.1, 1.0]), fields["F"].shape), atol=1e-12
     )
     case = Case("clamped", moved, model, params, dt=1e-3, t_end=1.0)
     traj = sphjax.simulate(case, n_steps=20, save_every=20)
@@ -219,8 +236,7 @@ def _free_body(penalty):
         smoothing_length=0.06,
         kernel=WendlandC2(),
         domain=Domain((-10.0, -10.0), (10.0, 10.0), (False, False)),
-        solid_penalty=penalty,
-        particle_kinds=(Kind.SOLID,),
+        systems=(SolidSystem(penalty=PenaltyForce() if penalty else None),),
     )
     params = make_params(
         2,

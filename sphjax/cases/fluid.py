@@ -7,12 +7,15 @@ import math
 import jax.numpy as jnp
 import numpy as np
 
-from sphjax.case import Case
 from sphjax.cases._geometry import box_walls, check_positive, check_resolution, lattice, wall_layers
-from sphjax.fluid.eos import tait_density
-from sphjax.kernels import QuinticSpline, WendlandC2, as_kernel
-from sphjax.state import Domain, Kind, Model, make_params, make_state
-from sphjax.timestep import stable_time_step
+from sphjax.cases._systems import fluid_system, wall_system
+from sphjax.core.case import Case
+from sphjax.core.kernels import QuinticSpline, WendlandC2, as_kernel
+from sphjax.core.model import Domain, Model
+from sphjax.core.params import make_params
+from sphjax.core.state import Kind, make_state
+from sphjax.integration.timestep import stable_time_step
+from sphjax.physics.fluid.eos import tait_density
 
 
 def _finish(name, state, model, params, t_end, info, dt=None):
@@ -96,13 +99,16 @@ def taylor_green(
         smoothing_length=h_factor * dx,
         kernel=kernel,
         domain=Domain((0.0, 0.0), (1.0, 1.0), (True, True)),
-        density=density,
-        gamma=gamma,
-        artificial_viscosity=artificial_alpha > 0,
-        physical_viscosity=True,
-        density_diffusion=density_diffusion,
-        transport_velocity=transport_velocity,
-        particle_kinds=(Kind.FLUID,),
+        systems=(
+            fluid_system(
+                density=density,
+                gamma=gamma,
+                artificial_viscosity=artificial_alpha > 0,
+                physical_viscosity=True,
+                density_diffusion=density_diffusion,
+                transport_velocity=transport_velocity,
+            ),
+        ),
     )
     state = make_state(x, u, rho, rho0 * dx**2, Kind.FLUID)
     info = dict(dx=dx, n=n, speed=U, viscosity=nu, reynolds=reynolds, decay_rate=-8 * np.pi**2 * nu)
@@ -157,12 +163,10 @@ def poiseuille(
         smoothing_length=h,
         kernel=kernel,
         domain=Domain((0.0, -margin), (length, L + margin), (True, False)),
-        density="summation",
-        gamma=1.0,
-        artificial_viscosity=False,
-        physical_viscosity=True,
-        wall_slip="no_slip",
-        particle_kinds=(Kind.FLUID, Kind.WALL),
+        systems=(
+            fluid_system(density="summation", gamma=1.0, physical_viscosity=True),
+            wall_system("no_slip"),
+        ),
     )
     state = make_state(x, 0.0, rho0, rho0 * dx**2, kind)
     info = dict(
@@ -212,7 +216,8 @@ def _tank(
     g,
     c0,
     params_kw,
-    model_kw,
+    fluid_kw,
+    wall_slip,
     t_end,
     info,
     fluid_height,
@@ -222,7 +227,7 @@ def _tank(
     x = np.concatenate([fluid, walls])
     kind = np.concatenate([np.full(len(fluid), Kind.FLUID), np.full(len(walls), Kind.WALL)])
     # hydrostatic initial density so the column starts near equilibrium (eq. 12 inverted)
-    gamma = model_kw.get("gamma", 7.0)
+    gamma = fluid_kw.get("gamma", 7.0)
     depth = np.where(kind == Kind.FLUID, fluid_height - x[:, 1], 0.0)
     rho = np.asarray(tait_density(jnp.asarray(rho0 * g * depth), rho0, c0, gamma))
     params = make_params(2, reference_density=rho0, sound_speed=c0, gravity=(0.0, -g), **params_kw)
@@ -234,8 +239,7 @@ def _tank(
         domain=Domain(
             (-margin, -margin), (tank_width + margin, 2.0 * tank_height + margin), (False, False)
         ),
-        particle_kinds=(Kind.FLUID, Kind.WALL),
-        **model_kw,
+        systems=(fluid_system(**fluid_kw), wall_system(wall_slip)),
     )
     state = make_state(x, 0.0, rho, rho0 * dx**2, kind)
     return _finish(name, state, model, params, t_end, info)
@@ -283,8 +287,8 @@ def hydrostatic_tank(
             gamma=7.0,
             artificial_viscosity=True,
             density_diffusion="molteni",
-            wall_slip="no_slip",
         ),
+        "no_slip",
         t_end,
         info,
         H,
@@ -351,8 +355,8 @@ def dam_break(
             gamma=7.0,
             artificial_viscosity=True,
             density_diffusion=density_diffusion,
-            wall_slip=wall_slip,
         ),
+        wall_slip,
         t_end,
         info,
         H,

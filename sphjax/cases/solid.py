@@ -19,11 +19,15 @@ import math
 import jax.numpy as jnp
 import numpy as np
 
-from sphjax.case import Case
 from sphjax.cases._geometry import check_positive, check_resolution
-from sphjax.kernels import as_kernel
-from sphjax.state import Domain, Kind, Model, make_params, make_state
-from sphjax.timestep import stable_time_step
+from sphjax.core.case import Case
+from sphjax.core.kernels import as_kernel
+from sphjax.core.model import Domain, Model
+from sphjax.core.params import make_params
+from sphjax.core.state import Kind, make_state
+from sphjax.integration.timestep import stable_time_step
+from sphjax.physics.solid.penalty import PenaltyForce
+from sphjax.physics.solid.system import SolidSystem
 
 # Gray, Monaghan & Swift (2001) first bending mode: k L = 1.87510 (VALIDATION.md).
 PLATE_KL = 1.8751040687
@@ -77,9 +81,7 @@ def _solid_model(kernel, h, domain, penalty):
         smoothing_length=h,
         kernel=kernel,
         domain=domain,
-        artificial_viscosity=False,
-        solid_penalty=penalty,
-        particle_kinds=(Kind.SOLID, Kind.CLAMPED),
+        systems=(SolidSystem(penalty=PenaltyForce() if penalty else None),),
     )
 
 

@@ -18,7 +18,7 @@ import h5py
 import jax.numpy as jnp
 import numpy as np
 
-from sphjax.space import minimum_image
+from sphjax.core.space import minimum_image
 
 PAD, FLUID = -1, 0
 

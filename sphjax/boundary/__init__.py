@@ -1,1 +1,0 @@
-"""Boundary treatments: dummy wall particles (Adami, Hu & Adams 2012)."""

@@ -1,0 +1,50 @@
+"""Systems from the case factories' plain arguments (strings and flags)."""
+
+from __future__ import annotations
+
+from sphjax.physics.boundary.system import WallSystem
+from sphjax.physics.boundary.wall import AdamiBoundary
+from sphjax.physics.fluid.density import ContinuityDensity, SummationDensity
+from sphjax.physics.fluid.density_diffusion import MolteniColagrossi
+from sphjax.physics.fluid.eos import TaitEOS
+from sphjax.physics.fluid.momentum import TransportVelocity
+from sphjax.physics.fluid.system import FluidSystem
+from sphjax.physics.fluid.viscosity import ArtificialViscosity, MorrisViscosity
+
+DENSITIES = {"summation": SummationDensity(), "continuity": ContinuityDensity()}
+DIFFUSIONS = {None: None, "molteni": MolteniColagrossi()}
+SLIPS = ("no_slip", "free_slip")
+
+
+def fluid_system(
+    *,
+    density: str = "summation",
+    gamma: float = 7.0,
+    artificial_viscosity: bool = False,
+    physical_viscosity: bool = False,
+    density_diffusion: str | None = None,
+    transport_velocity: bool = False,
+) -> FluidSystem:
+    """A :class:`FluidSystem` from a case's arguments (``density`` is ``"summation"`` or
+    ``"continuity"``, ``density_diffusion`` ``None`` or ``"molteni"``)."""
+    if density not in DENSITIES:
+        raise ValueError(f"density must be 'summation' or 'continuity', got {density!r}")
+    if density_diffusion not in DIFFUSIONS:
+        raise ValueError(f"density_diffusion must be None or 'molteni', got {density_diffusion!r}")
+    viscosity = (ArtificialViscosity(),) * bool(artificial_viscosity) + (MorrisViscosity(),) * bool(
+        physical_viscosity
+    )
+    return FluidSystem(
+        equation_of_state=TaitEOS(gamma=float(gamma)),
+        density=DENSITIES[density],
+        viscosity=viscosity,
+        density_diffusion=DIFFUSIONS[density_diffusion],
+        transport_velocity=TransportVelocity() if transport_velocity else None,
+    )
+
+
+def wall_system(wall_slip: str = "no_slip") -> WallSystem:
+    """A :class:`WallSystem` with Adami walls, ``"no_slip"`` or ``"free_slip"``."""
+    if wall_slip not in SLIPS:
+        raise ValueError(f"wall_slip must be 'no_slip' or 'free_slip', got {wall_slip!r}")
+    return WallSystem(AdamiBoundary(no_slip=wall_slip == "no_slip"))

@@ -1,0 +1,1 @@
+"""Core types: State, Params, Model, Case; kernels, space and neighbour search."""

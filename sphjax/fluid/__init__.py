@@ -1,1 +1,0 @@
-"""Weakly compressible fluid SPH (formulation eqs. 5-12)."""

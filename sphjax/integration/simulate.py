@@ -1,0 +1,412 @@
+"""``simulate``: a Case run by the kick-drift-kick step in a ``lax.scan``.
+
+With concrete inputs it runs in compiled chunks: after each chunk it checks for
+neighbour-list overflow (re-allocating and repeating the chunk) and for an unstable run
+(NaN, a particle leaving the domain), and hands finished frames to ``on_frames`` (the HDF5
+writer).  Under ``jax.grad``, ``jit`` or ``vmap`` it is a single ``lax.scan`` whose steps
+are rematerialised in reverse mode (and, with ``checkpoint_every``, chunks of steps too),
+with the same checks raised from inside the computation.
+
+Frames are saved every ``save_every`` steps and at the last step.
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+import operator
+import warnings
+from collections.abc import Callable
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from sphjax.core.case import Case
+from sphjax.core.model import Model
+from sphjax.core.neighbors import capacity
+from sphjax.core.params import Params
+from sphjax.core.state import State, Trajectory
+from sphjax.integration import step as kdk
+from sphjax.integration.timestep import check_time_step
+from sphjax.physics.rhs import (
+    NEIGHBOR_IDX,
+    Neighbors,
+    build_neighbors,
+    evaluate,
+    overflowed,
+    update_neighbors,
+)
+
+
+class SimulationError(RuntimeError):
+    """A run went unstable: NaN or a particle left the domain."""
+
+    def __init__(self, message, step=None, particle=None, time=None):
+        super().__init__(message)
+        self.step, self.particle, self.time = step, particle, time
+
+
+class NeighborOverflowError(RuntimeError):
+    """The neighbour list ran out of room where it cannot be re-allocated."""
+
+
+_KEEP_NEIGHBOR_IDX = jax.checkpoint_policies.save_only_these_names(NEIGHBOR_IDX)
+
+
+# ---------------------------------------------------------------------------- one step
+
+
+def kick_drift_kick(state: State, neighbors: Neighbors, dt, model: Model, params: Params):
+    """Advance one step of size ``dt`` with neighbour lists; returns ``(state, neighbors)``.
+
+    :func:`sphjax.integration.step.kick_drift_kick` with the right-hand side evaluated on
+    neighbour lists updated at the drifted positions.
+    """
+    updated = []
+
+    def rates(drifted, density_step):
+        updated.append(update_neighbors(drifted.position, neighbors, model))
+        return evaluate(drifted, updated[0], model, params, density_step=density_step)
+
+    state = kdk.kick_drift_kick(state, dt, model, rates)
+    return state, updated[0]
+
+
+def unhealthy(state: State, model: Model):
+    """``[N]`` True where a particle is NaN/inf or outside the domain on a closed axis."""
+    finite = jnp.all(jnp.isfinite(state.position), -1) & jnp.all(jnp.isfinite(state.velocity), -1)
+    lower = jnp.asarray(model.domain.lower, state.position.dtype)
+    upper = jnp.asarray(model.domain.upper, state.position.dtype)
+    closed = ~jnp.asarray(model.domain.periodic)
+    outside = jnp.any(closed & ((state.position < lower) | (state.position > upper)), -1)
+    return ~finite | outside
+
+
+def _step_with_checks(carry, dt, model, params):
+    state, neighbors, failure, step = carry
+    state, neighbors = kick_drift_kick(state, neighbors, dt, model, params)
+    step = step + 1
+    bad = unhealthy(state, model)
+    record = (failure[0] < 0) & jnp.any(bad)
+    failure = jnp.where(record, jnp.stack([step, jnp.argmax(bad).astype(step.dtype)]), failure)
+    return state, neighbors, failure, step
+
+
+def _run_steps(carry, n_steps: int, checkpoint_every: int | None, step_fn):
+    """``n_steps`` steps, each rematerialised in reverse mode; with ``checkpoint_every``
+    also in chunks of that many steps.
+
+    Reverse mode keeps only a step's input carry and recomputes its internals when it is
+    transposed: storing every pair quantity of every step instead would take about 100 x
+    the memory and, being memory-bound on the CPU, twice the time.  Without
+    ``checkpoint_every`` the input carry of every step is kept (memory grows with the
+    number of steps); with it, only the first carry of each chunk is kept, and a chunk is
+    replayed once more (memory flat, one more forward pass).  Outside differentiation
+    ``jax.checkpoint`` costs nothing.
+    """
+
+    def body(c, _):
+        return step_fn(c), None
+
+    if checkpoint_every is None or n_steps <= 1:
+        return jax.lax.scan(jax.checkpoint(body), carry, None, length=n_steps)[0]
+    # a step's replay keeps its neighbour indices (recorded by the chunk replay) rather
+    # than repeating the cell-list search
+    body = jax.checkpoint(body, policy=_KEEP_NEIGHBOR_IDX)
+    chunk_len = min(checkpoint_every, n_steps)
+    n_chunks, rest = divmod(n_steps, chunk_len)
+
+    @jax.checkpoint
+    def chunk(c, _):
+        return jax.lax.scan(body, c, None, length=chunk_len)[0], None
+
+    carry = jax.lax.scan(chunk, carry, None, length=n_chunks)[0]
+    if rest:
+        carry = jax.lax.scan(body, carry, None, length=rest)[0]
+    return carry
+
+
+def _run_frames(carry, dt, params, *, model, save_every, n_frames, checkpoint_every):
+    """``n_frames`` frames of ``save_every`` steps from ``carry = (state, neighbors,
+    failure, step)``; returns the last carry and the frames' States."""
+    step_fn = functools.partial(_step_with_checks, dt=dt, model=model, params=params)
+
+    def frame(carry, _):
+        carry = _run_steps(carry, save_every, checkpoint_every, step_fn)
+        return carry, carry[0]
+
+    # No checkpoint around a frame: its chunks already store only their first carry, and
+    # one more level would replay the whole frame once more in reverse mode.
+    return jax.lax.scan(frame, carry, None, length=n_frames)
+
+
+_run_chunk = jax.jit(
+    _run_frames, static_argnames=("model", "save_every", "n_frames", "checkpoint_every")
+)
+
+
+# ---------------------------------------------------------------------------- simulate
+
+
+def _is_traced(*trees) -> bool:
+    return any(isinstance(x, jax.core.Tracer) for x in jax.tree_util.tree_leaves(trees))
+
+
+def _stack(frames: list[State]) -> State:
+    return jax.tree_util.tree_map(lambda *xs: jnp.concatenate(xs, axis=0), *frames)
+
+
+def _expand(state: State) -> State:
+    return jax.tree_util.tree_map(lambda x: x[None], state)
+
+
+def _raise_failure(failure, dt):
+    step, particle = (int(x) for x in np.asarray(failure))
+    if step >= 0:
+        raise SimulationError(
+            f"simulation went unstable at step {step} (t = {step * float(dt):.6g}): particle "
+            f"{particle} has a non-finite position/velocity or left the domain",
+            step=step,
+            particle=particle,
+            time=step * float(dt),
+        )
+
+
+def _raise_overflow(overflow):
+    if bool(overflow):
+        raise NeighborOverflowError(
+            "the neighbour list overflowed inside a traced (jit/grad/vmap) simulation, where it "
+            "cannot be re-allocated; raise Model.neighbor_capacity (e.g. "
+            "case.replace(model=case.model.replace(neighbor_capacity=2.0)))"
+        )
+
+
+def simulate(
+    case: Case,
+    params: Params | None = None,
+    *,
+    n_steps: int | None = None,
+    t_end: float | None = None,
+    save_every: int | None = None,
+    dt: float | None = None,
+    state: State | None = None,
+    checkpoint_every: int | None = None,
+    on_frames: Callable[[State, jax.Array], None] | None = None,
+    progress: Callable[[int], None] | None = None,
+    steps_per_chunk: int = 2000,
+) -> Trajectory:
+    """Run ``case`` and return its Trajectory (the initial frame first).
+
+    Args:
+      case: from ``sphjax.cases``.
+      params: differentiable parameters (default ``case.params``).
+      n_steps: number of steps; or give ``t_end`` (default ``case.t_end``).
+      save_every: steps between saved frames (default: only the last frame); when it
+        does not divide ``n_steps`` the last frame is at ``n_steps`` (see
+        ``Trajectory.times``).
+      dt: time step (default ``case.dt``); rejected above the stability limit.
+      state: initial state (default ``case.state_for(params)``: the case's initial state,
+        recomputed from ``params`` where it depends on them).
+      checkpoint_every: in reverse mode every step is rematerialised (only its input
+        carry is stored, about ``N * (4 d + 6 + K)`` numbers); with ``checkpoint_every``
+        the steps are also grouped in chunks of this many and only each chunk's first
+        carry is stored, so memory does not grow with every step, for one more forward
+        pass.  ``None``: store every step's carry (faster, memory linear in ``n_steps``).
+      on_frames: ``f(states, times)`` called with each finished block of frames (concrete
+        runs only); used to append to HDF5 as the run goes.
+      progress: ``f(n)`` called with the number of steps just completed.
+    Returns:
+      :class:`Trajectory` with ``ceil(n_steps / save_every) + 1`` frames.
+    """
+    params = case.params if params is None else params
+    state = case.state_for(params) if state is None else state
+    model = case.model
+    dt = case.dt if dt is None else dt
+    if n_steps is None:
+        t_end = case.t_end if t_end is None else t_end
+        if not t_end > 0:
+            raise ValueError(f"t_end must be positive, got {t_end}")
+        n_steps = max(1, int(math.ceil(t_end / float(dt) - 1e-9)))
+    if not isinstance(n_steps, int | np.integer) or n_steps < 1:
+        raise ValueError(f"n_steps must be a positive integer, got {n_steps!r}")
+    n_steps = int(n_steps)
+    save_every = n_steps if save_every is None else save_every
+    if not isinstance(save_every, int | np.integer) or save_every < 1:
+        raise ValueError(f"save_every must be a positive integer, got {save_every!r}")
+    save_every = int(min(save_every, n_steps))
+    if checkpoint_every is not None and int(checkpoint_every) < 1:
+        raise ValueError(f"checkpoint_every must be a positive integer, got {checkpoint_every}")
+    n_frames, rest = divmod(n_steps, save_every)
+    segments = ((save_every, n_frames),) + (((rest, 1),) if rest else ())
+    traced = _is_traced(params, state, dt)
+    if not traced:
+        _check_finite(state)
+        check_time_step(float(dt), state, model, params)
+        _check_inside(state, model)
+    dt = jnp.asarray(dt, state.position.dtype)
+
+    neighbor_state = state if not _is_traced(state) else case.state
+    # Allocation needs concrete values; inside an outer ``jit`` the jax-md set-up would
+    # otherwise be staged out and fail on a traced box size.
+    with jax.ensure_compile_time_eval():
+        neighbors = build_neighbors(neighbor_state, model)
+    if traced:
+        run = functools.partial(_simulate_traced, checkpoint_every=checkpoint_every)
+    else:
+        run = functools.partial(
+            _simulate_in_chunks,
+            on_frames=on_frames,
+            progress=progress,
+            steps_per_chunk=steps_per_chunk,
+        )
+    states = run(state, neighbors, dt, params, model, segments=segments)
+    steps = np.concatenate(
+        [[0], np.arange(1, n_frames + 1) * save_every, [n_steps] if rest else []]
+    )
+    times = jnp.asarray(steps, dt.dtype) * dt
+    return Trajectory(states=states, times=times)
+
+
+def _initial_carry(state, neighbors):
+    """``(state, neighbors, failure, step)``: no failure recorded (-1, -1), step 0."""
+    return state, neighbors, -jnp.ones(2, jnp.int32), jnp.zeros((), jnp.int32)
+
+
+def _simulate_traced(state, neighbors, dt, params, model, *, segments, checkpoint_every):
+    """One ``lax.scan`` per segment of equal frames (under grad/jit/vmap); overflow and
+    instability are raised from inside the computation.  Returns the frames, the initial
+    one first."""
+    neighbors = update_neighbors(state.position, neighbors, model, rebuild=True)
+    state = evaluate(state, neighbors, model, params)
+    carry, all_frames = _initial_carry(state, neighbors), [_expand(state)]
+    for save_every, n_frames in segments:
+        carry, frames = _run_frames(
+            carry,
+            dt,
+            params,
+            model=model,
+            save_every=save_every,
+            n_frames=n_frames,
+            checkpoint_every=checkpoint_every,
+        )
+        all_frames.append(frames)
+    jax.debug.callback(_raise_overflow, overflowed(carry[1]))
+    jax.debug.callback(_raise_failure, carry[2], dt)
+    return _stack(all_frames)
+
+
+def _simulate_in_chunks(
+    state,
+    neighbors,
+    dt,
+    params,
+    model,
+    *,
+    segments,
+    on_frames,
+    progress,
+    steps_per_chunk,
+):
+    """Compiled chunks of at most ``steps_per_chunk`` steps with concrete checks between
+    them: a neighbour overflow re-allocates and repeats the chunk; an unstable run hands
+    the frames before the failure to ``on_frames`` and raises.  Returns the frames."""
+    state = jax.jit(evaluate, static_argnames="model")(state, neighbors, model, params)
+    bad = ~np.all(np.isfinite(np.asarray(state.acceleration)), axis=-1)
+    if bad.any():
+        particle = int(np.argmax(bad))
+        raise SimulationError(
+            f"the initial state has a non-finite acceleration at particle {particle} "
+            "(step 0); check the initial density, mass and spacing of the case",
+            step=0,
+            particle=particle,
+            time=0.0,
+        )
+    all_frames = [_expand(state)]
+    if on_frames is not None:
+        on_frames(all_frames[0], jnp.zeros(1))
+    carry = _initial_carry(state, neighbors)
+    extra = [0]  # neighbour slots added beyond the allocation's own estimate
+    base = 0  # steps before the current segment
+    for save_every, n_frames in segments:
+        frames_per_chunk = max(1, steps_per_chunk // save_every)
+        done = 0
+        while done < n_frames:
+            k = min(frames_per_chunk, n_frames - done)
+            carry, frames = _run_chunk_growing(carry, dt, params, model, save_every, k, extra)
+            end_steps = base + (done + 1 + np.arange(k)) * save_every
+            frame_times = jnp.asarray(end_steps, dt.dtype) * dt
+            fail_step = int(carry[2][0])
+            if fail_step >= 0:
+                good = int(np.sum(end_steps < fail_step))
+                kept = jax.tree_util.tree_map(operator.itemgetter(slice(good)), frames)
+                if on_frames is not None and good:
+                    on_frames(kept, frame_times[:good])
+                _raise_failure(carry[2], dt)
+            if on_frames is not None:
+                on_frames(frames, frame_times)
+            all_frames.append(frames)
+            done += k
+            if progress is not None:
+                progress(k * save_every)
+        base += n_frames * save_every
+    return _stack(all_frames)
+
+
+def _run_chunk_growing(carry, dt, params, model, save_every, n_frames, extra):
+    """One compiled chunk; on a neighbour-list overflow, re-allocate with more room (``extra``
+    grows on every retry and is kept for later chunks) and repeat it."""
+    for _attempt in range(10):
+        new_carry, frames = _run_chunk(
+            carry,
+            dt,
+            params,
+            model=model,
+            save_every=save_every,
+            n_frames=n_frames,
+            checkpoint_every=None,
+        )
+        if not bool(overflowed(new_carry[1])):
+            return new_carry, frames
+        state, neighbors, _, step = carry
+        old = capacity(neighbors.search)
+        # grow on every retry: the chunk's start positions may need less room than the
+        # positions where it overflowed
+        extra[0] = max(extra[0] + old // 2, 1)
+        neighbors = build_neighbors(state, model, extra_capacity=extra[0])
+        carry = (state, neighbors, *carry[2:])
+        warnings.warn(
+            f"neighbour list overflowed near step {int(step)}; re-allocated "
+            f"{old} -> {capacity(neighbors.search)} slots and repeated the chunk",
+            stacklevel=4,
+        )
+    raise NeighborOverflowError("neighbour list kept overflowing; raise Model.neighbor_capacity")
+
+
+def _check_finite(state: State) -> None:
+    """Reject an initial state with NaN/inf in its positions, velocities, densities or masses."""
+    for name in ("position", "velocity", "density", "mass"):
+        x = np.asarray(getattr(state, name))
+        bad = ~np.isfinite(x.reshape(x.shape[0], -1)).all(axis=-1)
+        if bad.any():
+            i = int(np.argmax(bad))
+            raise ValueError(
+                f"state.{name}: particle {i} has a non-finite value {x[i].tolist()}; "
+                f"every initial {name} must be a finite number"
+            )
+
+
+def _check_inside(state: State, model: Model) -> None:
+    """Reject initial particles outside the domain (periodic axes included)."""
+    x = np.asarray(state.position)
+    lower, upper = np.asarray(model.domain.lower), np.asarray(model.domain.upper)
+    outside = np.any((x < lower) | (x > upper), axis=-1)
+    periodic_out = np.any(np.asarray(model.domain.periodic) & ((x < lower) | (x >= upper)), -1)
+    bad = outside | periodic_out
+    if bad.any():
+        i = int(np.argmax(bad))
+        raise ValueError(
+            f"state.position: particle {i} at {x[i].tolist()} lies outside the domain "
+            f"[{model.domain.lower}, {model.domain.upper}) (periodic axes "
+            f"{model.domain.periodic}); move it inside or enlarge Model.domain"
+        )

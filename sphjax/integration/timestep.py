@@ -1,0 +1,70 @@
+"""Stable time steps.
+
+Fluid: ``dt = min(CFL h / (c0 + |v|max), 0.125 h^2 / nu, 0.25 sqrt(h / |g|))``, CFL 0.25.
+Solid (TLSPH): ``dt = CFL h / (c_s + |v|max)``, ``c_s = sqrt(K / rho0)``,
+``K = E / (d (1 - 2 nu))``, CFL 0.3.
+
+``MAX_*_CFL`` are the largest Courant numbers :func:`sphjax.simulate` accepts; a larger
+time step is rejected before the run starts.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from sphjax.core.state import Kind, State
+from sphjax.physics.fluid.system import FluidSystem
+
+FLUID_CFL = 0.25
+SOLID_CFL = 0.3
+MAX_FLUID_CFL = 0.5
+MAX_SOLID_CFL = 0.6
+
+
+def solid_sound_speed(params, dim: int):
+    """``c_s = sqrt(K / rho0)`` with the bulk modulus ``K = E / (d (1 - 2 nu))``."""
+    bulk = params.young_modulus / (dim * (1.0 - 2.0 * params.poisson_ratio))
+    return (bulk / params.solid_density) ** 0.5
+
+
+def stable_time_step(
+    state: State, model, params, fluid_cfl=FLUID_CFL, solid_cfl=SOLID_CFL
+) -> float:
+    """The largest stable step for the kinds in ``model`` (concrete values, outside jit)."""
+    h = model.smoothing_length
+    kinds = np.asarray(state.kind)
+    speed = np.linalg.norm(np.asarray(state.velocity), axis=-1)
+    limits = []
+    if int(Kind.FLUID) in model.particle_kinds:
+        v_max = float(speed[kinds == Kind.FLUID].max(initial=0.0))
+        limits.append(fluid_cfl * h / (float(params.sound_speed) + v_max))
+        fluid = model.system(FluidSystem)
+        nu = float(params.kinematic_viscosity) if fluid.physical_viscosity else 0.0
+        if nu > 0:
+            limits.append(0.125 * h**2 / nu)
+        g = float(np.linalg.norm(np.asarray(params.gravity)))
+        if g > 0:
+            limits.append(0.25 * math.sqrt(h / g))
+    if int(Kind.SOLID) in model.particle_kinds:
+        v_max = float(speed[kinds == Kind.SOLID].max(initial=0.0))
+        c_s = float(solid_sound_speed(params, model.dim))
+        limits.append(solid_cfl * h / (c_s + v_max))
+    if not limits:
+        raise ValueError("the model has no fluid or solid particles to set a time step")
+    return min(limits)
+
+
+def check_time_step(dt: float, state: State, model, params) -> None:
+    """Raise a ValueError naming ``dt`` if it exceeds the stability limit."""
+    if not dt > 0 or not math.isfinite(dt):
+        raise ValueError(f"dt must be a positive number, got {dt}")
+    limit = stable_time_step(state, model, params, MAX_FLUID_CFL, MAX_SOLID_CFL)
+    if dt > limit * (1.0 + 1e-9):
+        recommended = stable_time_step(state, model, params)
+        raise ValueError(
+            f"dt={dt:.4g} exceeds the stability limit {limit:.4g} of this case "
+            f"(acoustic CFL {MAX_FLUID_CFL} fluid / {MAX_SOLID_CFL} solid, viscous and "
+            f"body-force limits); pass dt <= {limit:.4g}, e.g. the recommended {recommended:.4g}"
+        )

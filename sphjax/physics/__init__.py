@@ -1,0 +1,1 @@
+"""Physics: systems, per-pair terms of the formulation, interactions, the right-hand side."""

@@ -1,0 +1,1 @@
+"""Boundaries: wall particles (Adami, Hu & Adams 2012)."""

@@ -1,0 +1,68 @@
+"""The wall system (boundary dummy particles, Adami, Hu & Adams 2012) and its update stage.
+
+Wall particles do not move by themselves (their motion is prescribed; fixed today).  In
+the update stage each takes its pressure from the fluid around it,
+
+    p_w = ( sum_f p_f W_wf + (g - a_w) . sum_f rho_f r_wf W_wf ) / sum_f W_wf,
+
+its density from the fluid's inverse equation of state, and, for no-slip walls, the
+velocity ``v_w = 2 v_wall - sum_f v_f W_wf / sum_f W_wf`` the viscous terms see.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import jax.numpy as jnp
+
+from sphjax.core.state import Kind
+from sphjax.physics.boundary.wall import (
+    AdamiBoundary,
+    extrapolation_terms,
+    wall_pressure,
+    wall_velocity,
+)
+
+
+@dataclasses.dataclass(frozen=True)
+class WallSystem:
+    """Boundary particles (kind ``WALL``) with a boundary model.
+
+    Attributes:
+      boundary: :class:`~sphjax.AdamiBoundary` (``no_slip=True`` or ``False``).
+    """
+
+    boundary: AdamiBoundary = AdamiBoundary()
+
+    kinds = (Kind.WALL,)
+    current_configuration = True
+
+    def __post_init__(self):
+        if not isinstance(self.boundary, AdamiBoundary):
+            raise ValueError(
+                f"WallSystem.boundary must be AdamiBoundary(...), got {self.boundary!r}"
+            )
+
+    def replace(self, **changes) -> WallSystem:
+        return dataclasses.replace(self, **changes)
+
+
+def _extrapolation_summand(pair, a, b, shared):
+    return extrapolation_terms(pair, b["p"], b["rho"], b["v"])
+
+
+def update_wall(system: WallSystem, wall: dict, fluid_system, fluid: dict, pairs, ctx):
+    """Update stage of a wall: pressure, density and viscous velocity from the fluid.
+
+    Args:
+      wall: the wall's fields ``x, v``; fluid: the updated fluid fields ``x, v, p, rho``.
+      pairs: the wall's list against the fluid.
+    Returns:
+      ``wall`` with ``p``, ``rho`` and ``v_viscous``.
+    """
+    cols = {"x": fluid["x"], "p": fluid["p"], "rho": fluid["rho"], "v": fluid["v"]}
+    sums = ctx.pair_sum(_extrapolation_summand, {"x": wall["x"]}, cols, pairs)
+    pressure = wall_pressure(sums, ctx.params.gravity, jnp.zeros_like(wall["x"]))
+    density = fluid_system.equation_of_state.density(pressure, ctx.params.fluid)
+    v_viscous = wall_velocity(sums, wall["v"]) if system.boundary.no_slip else wall["v"]
+    return {**wall, "p": pressure, "rho": density, "v_viscous": v_viscous}

@@ -1,0 +1,1 @@
+"""Fluids: equations of state, density, viscosity, density diffusion, momentum."""

@@ -1,0 +1,172 @@
+"""The weakly compressible fluid system (WCSPH) and its update stage.
+
+Governing equations (formulation eqs. 5, 10-12):
+
+    rho_a = sum_b m_b W_ab                                   (summation, eq. 5), or
+    Drho_a/Dt = sum_b m_b v_ab . grad_a W_ab [+ D_a]         (continuity, eq. 11; delta-SPH)
+    p_a = p(rho_a)                                           (equation of state, eq. 12)
+    Dv_a/Dt = - sum_b m_b (p_a / rho_a^2 + p_b / rho_b^2 + Pi_ab) grad_a W_ab
+              + viscous terms + g                            (eq. 10)
+
+The sums run over fluid neighbours and over boundary particles (walls), whose pressure,
+density and velocity the boundary system provides.  The momentum terms are interactions
+(:mod:`sphjax.physics.interactions`); this module holds the system and its update stage
+(density and pressure).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+
+import jax.numpy as jnp
+
+from sphjax.core import kernels
+from sphjax.core.state import Kind
+from sphjax.physics.fluid.density import (
+    ContinuityDensity,
+    SummationDensity,
+    continuity_term,
+    summation_term,
+)
+from sphjax.physics.fluid.density_diffusion import MolteniColagrossi, molteni_term
+from sphjax.physics.fluid.eos import TaitEOS
+from sphjax.physics.fluid.momentum import TransportVelocity
+from sphjax.physics.fluid.viscosity import ArtificialViscosity, MorrisViscosity
+
+
+@dataclasses.dataclass(frozen=True)
+class FluidSystem:
+    """A weakly compressible fluid (kind ``FLUID``); its parameters are ``Params.fluid``.
+
+    Attributes:
+      equation_of_state: :class:`~sphjax.TaitEOS` or :class:`~sphjax.LinearEOS`.
+      density: :class:`~sphjax.SummationDensity` (eq. 5) or
+        :class:`~sphjax.ContinuityDensity` (eq. 11).
+      viscosity: the viscous terms of eq. 10, a tuple of
+        :class:`~sphjax.ArtificialViscosity` and/or :class:`~sphjax.MorrisViscosity`.
+      density_diffusion: ``None`` or :class:`~sphjax.MolteniColagrossi` (with
+        continuity density).
+      transport_velocity: ``None`` or :class:`~sphjax.TransportVelocity`.
+    """
+
+    equation_of_state: object = TaitEOS()
+    density: object = SummationDensity()
+    viscosity: tuple = ()
+    density_diffusion: object = None
+    transport_velocity: object = None
+
+    kinds = (Kind.FLUID,)
+    current_configuration = True
+
+    def __post_init__(self):
+        if not isinstance(self.density, SummationDensity | ContinuityDensity):
+            raise ValueError(
+                "FluidSystem.density must be SummationDensity() or ContinuityDensity(), "
+                f"got {self.density!r}"
+            )
+        viscosity = self.viscosity if isinstance(self.viscosity, tuple) else (self.viscosity,)
+        if not all(isinstance(v, ArtificialViscosity | MorrisViscosity) for v in viscosity):
+            raise ValueError(
+                "FluidSystem.viscosity must be a tuple of ArtificialViscosity() and/or "
+                f"MorrisViscosity(), got {self.viscosity!r}"
+            )
+        object.__setattr__(self, "viscosity", viscosity)
+        if self.density_diffusion is not None:
+            if not isinstance(self.density_diffusion, MolteniColagrossi):
+                raise ValueError(
+                    "FluidSystem.density_diffusion must be None or MolteniColagrossi(), "
+                    f"got {self.density_diffusion!r}"
+                )
+            if not isinstance(self.density, ContinuityDensity):
+                raise ValueError("FluidSystem.density_diffusion needs ContinuityDensity()")
+        if self.transport_velocity is not None and not isinstance(
+            self.transport_velocity, TransportVelocity
+        ):
+            raise ValueError(
+                "FluidSystem.transport_velocity must be None or TransportVelocity(), "
+                f"got {self.transport_velocity!r}"
+            )
+        if not hasattr(self.equation_of_state, "pressure"):
+            raise ValueError(
+                "FluidSystem.equation_of_state must be an equation of state such as "
+                f"TaitEOS(gamma=7.0) or LinearEOS(), got {self.equation_of_state!r}"
+            )
+
+    @property
+    def artificial_viscosity(self) -> bool:
+        return any(isinstance(v, ArtificialViscosity) for v in self.viscosity)
+
+    @property
+    def physical_viscosity(self) -> bool:
+        return any(isinstance(v, MorrisViscosity) for v in self.viscosity)
+
+    def replace(self, **changes) -> FluidSystem:
+        return dataclasses.replace(self, **changes)
+
+
+def _kernel_summand(pair, a, b, shared):
+    """``W_ab``; times the weight ``m_b`` it is eq. 5's pair term."""
+    return summation_term(pair, 1.0)
+
+
+def _velocity_divergence_summand(pair, a, b, shared):
+    """``(v_a - v_b) . grad_a W_ab``; times the weight ``m_b`` it is eq. 11's pair term."""
+    return continuity_term(pair, 1.0, a["v"], b["v"])
+
+
+def _continuity_with_diffusion(pair, a, b, shared, *, h):
+    gravity, rho0, c0, delta = shared
+    rate = continuity_term(pair, b["m"], a["v"], b["v"])
+    hydrostatic = rho0 * sum(gravity[i] * pair.dr[..., i] for i in range(pair.dr.shape[-1])) / c0**2
+    volume_b = b["m"] / b["rho"]
+    return rate + molteni_term(pair, a["rho"], b["rho"], volume_b, hydrostatic, delta, h, c0)
+
+
+def update_fluid(system: FluidSystem, fluid: dict, boundaries, ctx, density_step=None):
+    """Update stage of a fluid: density (eq. 5 or 11 with delta-SPH) and pressure (eq. 12).
+
+    Args:
+      fluid: the fluid's fields ``x, v, m, rho`` (``[n, ...]``).
+      boundaries: ``(fields, pairs)`` of each boundary system the fluid sees, ``fields``
+        with ``x, v, m``, ``pairs`` the fluid's list against it.
+      ctx: :class:`sphjax.physics.rhs.Context` (fluid-fluid pairs, geometry, params).
+      density_step: with continuity density, advance the density by this step first.
+    Returns:
+      ``fluid`` with ``rho``, ``p`` and ``drho`` (the density rate, 0 for summation).
+    """
+    params, geometry = ctx.params.fluid, ctx.geometry
+    rows = {"x": fluid["x"], "m": fluid["m"], "v": fluid["v"], "rho": fluid["rho"]}
+    density, rate = fluid["rho"], jnp.zeros_like(fluid["rho"])
+    if isinstance(system.density, SummationDensity):
+        own = ctx.pair_sum(_kernel_summand, rows, None, ctx.fluid_pairs, weight="m", parity=1)
+        for cols, pairs in boundaries:
+            own = own + ctx.pair_sum(_kernel_summand, rows, _boundary(cols), pairs, weight="m")
+        self_weight = kernels.W(geometry.kernel, 0.0, geometry.smoothing_length, geometry.dim)
+        density = fluid["m"] * self_weight + own
+    else:
+        if system.density_diffusion is None:
+            rate = ctx.pair_sum(
+                _velocity_divergence_summand, rows, None, ctx.fluid_pairs, weight="m", parity=1
+            )
+        else:
+            summand = functools.partial(_continuity_with_diffusion, h=geometry.smoothing_length)
+            shared = (
+                ctx.params.gravity,
+                params.reference_density,
+                params.sound_speed,
+                params.density_diffusion,
+            )
+            rate = ctx.pair_sum(summand, rows, None, ctx.fluid_pairs, shared)
+        for cols, pairs in boundaries:
+            rate = rate + ctx.pair_sum(
+                _velocity_divergence_summand, rows, _boundary(cols), pairs, weight="m"
+            )
+        if density_step is not None:
+            density = density + density_step * rate
+    pressure = system.equation_of_state.pressure(density, params)
+    return {**fluid, "rho": density, "p": pressure, "drho": rate}
+
+
+def _boundary(fields):
+    return {"x": fields["x"], "m": fields["m"], "v": fields["v"]}

@@ -1,0 +1,163 @@
+"""Interactions: the pairwise terms between two systems, keyed by their types.
+
+The second stage of the right-hand side is a sum over interactions: for each ordered pair
+of systems ``(A, B)`` whose types appear in :data:`INTERACTIONS`, a pure function over the
+neighbour pairs of those two systems returns the accelerations of ``A``'s particles due to
+``B``'s.  Pairs of systems that do not interact (wall-wall) have no entry: their pairs are
+never formed.  A coupling is a pair of such functions; each is a sum of per-pair terms of
+the formulation through :func:`sphjax.physics.pairs.pair_sum`.
+
+* fluid-fluid: pressure and artificial viscosity (eq. 10), Morris viscosity, the
+  transport-velocity stress and background-pressure shift (Adami, Hu & Adams 2013);
+* fluid-wall: the same pressure and viscous terms against the boundary particles' pressure,
+  density and (no-slip) velocity from the wall's update stage (Adami et al. 2012);
+* solid-solid: the TLSPH momentum equation (eq. 14) with the optional penalty force.
+
+Each function returns a dict with ``"a"`` (``[n_A, d]``) and, for fluids, ``"shift"``.
+"""
+
+from __future__ import annotations
+
+import functools
+
+import jax.numpy as jnp
+
+from sphjax.core.space import displacement_fn
+from sphjax.physics.boundary.system import WallSystem
+from sphjax.physics.fluid.momentum import pressure_acceleration, transport_stress_acceleration
+from sphjax.physics.fluid.system import FluidSystem
+from sphjax.physics.fluid.viscosity import monaghan_pi, morris_acceleration
+from sphjax.physics.solid.penalty import penalty_force
+from sphjax.physics.solid.system import SolidSystem
+
+
+def _hydrodynamic_summand(pair, a, b, shared, *, h, artificial, morris, stress, shift, viscous):
+    """Eq. 10 per pair (pressure, ``Pi_ab``, Morris) plus the transport-velocity terms,
+    per unit neighbour mass (``pair_sum`` multiplies by the weight ``m_b``).  Every term
+    is antisymmetric under ``a <-> b``.
+
+    ``viscous``: whether the pair takes part in the viscous terms (no-slip walls and
+    fluid neighbours do, free-slip walls do not); ``b["vv"]`` is the velocity they see.
+    """
+    c0, alpha, beta, nu, p_transport = shared
+    unit = jnp.ones_like(pair.r)
+    out = {}
+    pi_ab = 0.0
+    v_ab = a["v"] - b["vv"]
+    if artificial and viscous:
+        pi_ab = monaghan_pi(pair, v_ab, a["rho"], b["rho"], c0, h, alpha, beta)
+    acceleration = pressure_acceleration(pair, unit, a["p"], a["rho"], b["p"], b["rho"], pi_ab)
+    if morris and viscous:
+        acceleration = acceleration + morris_acceleration(
+            pair, v_ab, unit, a["rho"], b["rho"], nu, h
+        )
+    if stress:
+        acceleration = acceleration + transport_stress_acceleration(
+            pair, unit, a["rho"], b["rho"], a["v"], b["v"], a["dv"], b["dv"]
+        )
+    out["a"] = acceleration
+    if shift:
+        out["shift"] = pressure_acceleration(
+            pair, unit, p_transport, a["rho"], p_transport, b["rho"]
+        )
+    return out
+
+
+def _fluid_shared(ctx):
+    fluid = ctx.params.fluid
+    return (
+        fluid.sound_speed,
+        fluid.artificial_alpha,
+        fluid.artificial_beta,
+        fluid.kinematic_viscosity,
+        fluid.transport_pressure,
+    )
+
+
+def _fluid_rows(fluid, stress):
+    rows = {k: fluid[k] for k in ("x", "v", "m", "rho", "p")}
+    rows["vv"] = fluid["v"]
+    if stress:
+        rows["dv"] = fluid["dv"]
+    return rows
+
+
+def fluid_fluid(system: FluidSystem, fluid, _other, _fluid, pairs, ctx):
+    """Fluid-fluid momentum (eq. 10, viscosities, transport velocity)."""
+    stress = system.transport_velocity is not None and "dv" in fluid
+    summand = functools.partial(
+        _hydrodynamic_summand,
+        h=ctx.geometry.smoothing_length,
+        artificial=system.artificial_viscosity,
+        morris=system.physical_viscosity,
+        stress=stress,
+        shift=system.transport_velocity is not None,
+        viscous=True,
+    )
+    rows = _fluid_rows(fluid, stress)
+    return ctx.pair_sum(summand, rows, None, pairs, _fluid_shared(ctx), weight="m", parity=-1)
+
+
+def fluid_wall(system: FluidSystem, fluid, wall_system: WallSystem, wall, pairs, ctx):
+    """Fluid-wall momentum: eq. 10 against the walls' extrapolated pressure and density;
+    viscous terms with the extrapolated velocity for no-slip walls only."""
+    summand = functools.partial(
+        _hydrodynamic_summand,
+        h=ctx.geometry.smoothing_length,
+        artificial=system.artificial_viscosity,
+        morris=system.physical_viscosity,
+        stress=False,
+        shift=system.transport_velocity is not None,
+        viscous=wall_system.boundary.no_slip,
+    )
+    cols = {"x": wall["x"], "m": wall["m"], "rho": wall["rho"], "p": wall["p"]}
+    cols["vv"] = wall["v_viscous"]
+    rows = _fluid_rows(fluid, False)
+    return ctx.pair_sum(summand, rows, cols, pairs, _fluid_shared(ctx), weight="m")
+
+
+def _solid_summand(pair, a, b, shared, *, domain, penalty):
+    """Eq. 14 per pair per unit neighbour volume (``pair_sum`` multiplies by ``V0_b``):
+    ``(P_a L0_a + P_b L0_b) / rho0 grad0_a W`` plus the penalty force ``f^PF / (m0_a V0_b)``;
+    antisymmetric under ``a <-> b``."""
+    rho0, young_modulus, alpha = shared
+    acceleration = _matvec((a["PL0"] + b["PL0"]) / rho0, pair.grad_w)
+    if penalty:
+        dx = displacement_fn(domain)(a["xc"], b["xc"]) * pair.mask[..., None]
+        unit = jnp.ones_like(pair.r)
+        force = penalty_force(pair, dx, a["F"], b["F"], unit, unit, young_modulus, alpha)
+        acceleration = acceleration + force / rho0
+    return {"a": acceleration}
+
+
+def _matvec(matrix, vector):
+    return sum(matrix[..., :, i] * vector[..., i, None] for i in range(vector.shape[-1]))
+
+
+def solid_solid(system: SolidSystem, solid, _other, _solid, pairs, ctx):
+    """Solid momentum (eq. 14) over the reference-configuration neighbours."""
+    params = ctx.params.solid
+    summand = functools.partial(
+        _solid_summand, domain=ctx.geometry.domain, penalty=system.penalty is not None
+    )
+    rows = {
+        "x": solid["X"],
+        "xc": solid["x"],
+        "V": solid["V"],
+        "PL0": solid["PL0"],
+        "F": solid["F"],
+    }
+    shared = (params.solid_density, params.young_modulus, params.penalty_alpha)
+    return ctx.pair_sum(summand, rows, None, pairs, shared, weight="V", parity=-1)
+
+
+#: (row system type, neighbour system type) -> interaction function
+INTERACTIONS = {
+    (FluidSystem, FluidSystem): fluid_fluid,
+    (FluidSystem, WallSystem): fluid_wall,
+    (SolidSystem, SolidSystem): solid_solid,
+}
+
+#: pairs of system types whose neighbour lists the update stage needs besides those of
+#: INTERACTIONS (the walls' extrapolation from the fluid)
+UPDATE_PAIRS = {(WallSystem, FluidSystem)}

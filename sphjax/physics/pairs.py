@@ -1,0 +1,458 @@
+"""Pair sums: the one combinator every SPH term goes through, and its adjoint.
+
+Every pairwise term of the formulation is a sum over the neighbours ``b`` of a particle
+``a`` of a per-pair function of the pair geometry and the two particles' fields:
+
+    out_a = sum_{b in N(a)} f(pair_ab, a, b)
+
+:func:`pair_sum` evaluates it over a dense neighbour list ``[N_a, K]`` (the spirit of
+``jax_md.smap.pair_neighbor_list``): it gathers the neighbours' fields, computes the
+:class:`PairGeometry` (``r_ab``, ``|r_ab|``, ``W_ab``, ``grad_a W_ab``), calls ``f`` and sums
+over the real neighbours inside the support.  ``f`` is written once, per pair; fields of
+``a`` arrive with a neighbour axis of length one (``[B, 1, ...]``), those of ``b`` with
+``[B, K, ...]``, so ``f`` reads like the equation.
+
+**Reverse mode.**  Autodiff transposes every gather ``q[j]`` into a scatter-add and keeps a
+dozen per-pair intermediates; on the CPU the reverse pass then costs about twice the
+forward.  Neighbour lists here are symmetric (``b in N(a)`` iff ``a in N(b)``; for two
+systems the list of ``B`` against ``A`` is the transpose of ``A`` against ``B``), so the
+cotangent of particle ``k``'s fields is a sum over ``k``'s own row:
+
+    abar_k = sum_{b in N(k)} d f(k, b)/d a_k^T obar_k            (k as the row particle)
+           + sum_{b in N^T(k)} d f(b, k)/d b_k^T obar_b          (k as the neighbour)
+
+The per-pair derivatives are ``jax.vjp`` of ``f`` itself, evaluated in blocks of particles
+whose per-pair arrays stay in cache, gathering only per-particle arrays: the forward is
+written once and its adjoint follows from it.  Within one system both roles share one pass
+and one geometry.  The adjoint is attached with :func:`sphjax._linear_call.custom_adjoint`,
+which keeps forward mode (``jvp``, ``jacfwd``) autodiff's; it gives first derivatives
+(``Model.pair_adjoint=False`` for second ones).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Callable
+
+import jax
+import jax.numpy as jnp
+
+from sphjax._linear_call import custom_adjoint
+from sphjax.core import kernels
+from sphjax.core.pytree import pytree_dataclass
+from sphjax.core.space import displacement_fn
+
+tree_map = jax.tree_util.tree_map
+
+
+@pytree_dataclass
+class PairGeometry:
+    """Geometry of the pairs of a block of rows ``a`` and their neighbours ``b``.
+
+    Attributes:
+      dr: ``[B, K, d]`` ``r_ab = r_a - r_b`` (minimum image; 0 outside the support).
+      r: ``[B, K]`` ``|r_ab|`` (0 outside the support).
+      w: ``[B, K]`` ``W(r_ab, h)`` (0 outside the support).
+      grad_w: ``[B, K, d]`` ``grad_a W(r_ab, h)`` (0 outside the support and at ``r = 0``).
+      mask: ``[B, K]`` True for a real neighbour inside the support.
+    """
+
+    dr: jax.Array
+    r: jax.Array
+    w: jax.Array
+    grad_w: jax.Array
+    mask: jax.Array
+
+    def swapped(self) -> PairGeometry:
+        """The same pairs seen from ``b``: ``r_ba = -r_ab``, ``grad_b W = -grad_a W``."""
+        return dataclasses.replace(self, dr=-self.dr, grad_w=-self.grad_w)
+
+
+@dataclasses.dataclass(frozen=True)
+class Geometry:
+    """What pair geometry needs from the Model (hashable): kernel, ``h``, ``d``, domain."""
+
+    kernel: kernels.Kernel
+    smoothing_length: float
+    dim: int
+    cutoff: float
+    domain: object
+
+    @classmethod
+    def of(cls, model) -> Geometry:
+        return cls(model.kernel, model.smoothing_length, model.dim, model.cutoff, model.domain)
+
+    def pairs(self, x_a, x_b, valid) -> PairGeometry:
+        """Pair geometry of positions ``x_a`` and ``x_b`` (broadcast to ``[B, K, d]``)."""
+        dr = displacement_fn(self.domain)(x_a, x_b)
+        return self.pairs_of(
+            jnp.broadcast_to(dr, jnp.broadcast_shapes(x_a.shape, x_b.shape)), valid
+        )
+
+    def displacement(self, x_a, x_b):
+        """``r_ab`` (minimum image), broadcast to ``[B, K, d]``."""
+        dr = displacement_fn(self.domain)(x_a, x_b)
+        return jnp.broadcast_to(dr, jnp.broadcast_shapes(x_a.shape, x_b.shape))
+
+    def pairs_of(self, dr, valid) -> PairGeometry:
+        """Pair geometry from the pair vectors ``r_ab`` (``[B, K, d]``)."""
+        r2 = sum(dr[..., i] * dr[..., i] for i in range(dr.shape[-1]))
+        mask = valid & (r2 < self.cutoff**2)
+        inside = mask & (r2 > 0)  # coincident particles: W(0), no gradient
+        r = jnp.where(inside, jnp.sqrt(jnp.where(inside, r2, 1.0)), 0.0)
+        dr = jnp.where(mask[..., None], dr, 0.0)
+        h, dim = self.smoothing_length, self.dim
+        w = jnp.where(mask, kernels.W(self.kernel, r, h, dim), 0.0)
+        factor = jnp.where(
+            inside, kernels.dW_dr(self.kernel, jnp.where(inside, r, 1.0), h, dim), 0.0
+        )
+        grad_w = (factor / jnp.where(inside, r, 1.0))[..., None] * dr
+        return PairGeometry(dr=dr, r=r, w=w, grad_w=grad_w, mask=mask)
+
+
+@pytree_dataclass(static=("n_rows", "n_cols"))
+class PairList:
+    """Neighbours of the particles of one system (rows) among those of another (columns).
+
+    Attributes:
+      idx: ``[n_rows, K]`` column indices, padded with ``n_cols``.
+      transpose: ``[n_cols, K']`` row indices of each column particle's neighbours, padded
+        with ``n_rows`` (the same pairs seen from the columns), or ``None`` when rows and
+        columns are the same particles (the list is then its own transpose).
+    """
+
+    idx: jax.Array
+    transpose: jax.Array | None
+    n_rows: int
+    n_cols: int
+
+
+def _split_blocks(a, n_blocks, block, pad, pad_index):
+    """``[N, ...] -> [n_blocks, block, ...]``; integer (neighbour index) rows are padded
+    with ``pad_index`` (no neighbours), float rows with copies of the last row, so that
+    per-particle expressions (``p / rho^2``) stay finite on padding."""
+    widths = [(0, pad)] + [(0, 0)] * (a.ndim - 1)
+    if jnp.issubdtype(a.dtype, jnp.integer):
+        a = jnp.pad(a, widths, constant_values=pad_index)
+    else:
+        a = jnp.pad(a, widths, mode="edge")
+    return a.reshape((n_blocks, block) + a.shape[1:])
+
+
+def _rowwise(fn, rows, block: int | None, pad_index: int):
+    """``fn`` over blocks of ``block`` rows with ``lax.map``; ``rows`` a pytree of
+    ``[N, ...]`` arrays, integer leaves padded with ``pad_index``.  Returns ``fn``'s pytree
+    of ``[N, ...]`` arrays."""
+    n = jax.tree_util.tree_leaves(rows)[0].shape[0]
+    if block is None or block >= n:
+        return fn(rows)
+    n_blocks = -(-n // block)
+    pad = n_blocks * block - n
+
+    def split(a):
+        return _split_blocks(a, n_blocks, block, pad, pad_index)
+
+    out = jax.lax.map(fn, tree_map(split, rows))
+    return tree_map(lambda a: a.reshape((n_blocks * block,) + a.shape[2:])[:n], out)
+
+
+def _gather(fields, j):
+    return tree_map(lambda q: q[j], fields)
+
+
+def _masked(out, mask):
+    return tree_map(
+        lambda o: jnp.where(mask.reshape(mask.shape + (1,) * (o.ndim - 2)), o, 0.0), out
+    )
+
+
+def _row_view(fields):
+    return tree_map(lambda q: q[:, None], fields)
+
+
+def _sum_pairs(out):
+    return tree_map(lambda o: jnp.sum(o, axis=1), out)
+
+
+def _weighted(f, weight):
+    """``f`` times the neighbour's ``weight`` field (``None``: ``f`` itself)."""
+    if weight is None:
+        return f
+
+    def weighted(pair, a, b, shared):
+        return _scale(f(pair, a, b, shared), b[weight])
+
+    return weighted
+
+
+def _scale(out, factor):
+    return tree_map(lambda o: o * factor.reshape(factor.shape + (1,) * (o.ndim - factor.ndim)), out)
+
+
+def _forward(f, geometry, block, rows, cols, shared, idx):
+    n_cols = jax.tree_util.tree_leaves(cols)[0].shape[0]
+
+    def one_block(args):
+        rows_k, idx_k = args
+        valid = idx_k < n_cols
+        b = _gather(cols, jnp.where(valid, idx_k, 0))
+        a = _row_view(rows_k)
+        pair = geometry.pairs(a["x"], b["x"], valid)
+        return _sum_pairs(_masked(f(pair, a, b, shared), pair.mask))
+
+    return _rowwise(one_block, (rows, idx), block, n_cols)
+
+
+def _per_pair(fields, shape):
+    """Row fields ``[B, ...]`` repeated along the neighbour axis: ``[B, K, ...]``."""
+    return tree_map(lambda q: jnp.broadcast_to(q[:, None], shape + q.shape[1:]), fields)
+
+
+def _sum_over_pairs(tree):
+    return tree_map(lambda q: jnp.sum(q, axis=1), tree)
+
+
+def _adjoint_self(f, geometry, block, fields, shared, idx, obar):
+    """Cotangents of ``fields`` and ``shared`` for a sum within one system (both roles in
+    one pass over each particle's own row).
+
+    The per-pair function is differentiated with respect to per-pair copies of its inputs
+    (the pair vector ``r_kb``, the row's fields), so that its derivative is
+    element-wise code that XLA fuses into one loop, like the forward; the sums over the
+    neighbours follow.  ``x_k`` enters through ``r_kb`` only.
+    """
+    n = jax.tree_util.tree_leaves(fields)[0].shape[0]
+
+    def one_block(args):
+        fields_k, idx_k, obar_k = args
+        valid = idx_k < n
+        j = jnp.where(valid, idx_k, 0)
+        b = _gather(fields, j)
+        obar_b = _gather(obar, j)
+        a = _per_pair(fields_k, idx_k.shape)
+        dr = geometry.displacement(a["x"], b["x"])
+        s = shared
+
+        def both_roles(dr, a, s):
+            pair = geometry.pairs_of(dr, valid)
+            as_row = _masked(f(pair, a, b, s), pair.mask)
+            as_neighbour = _masked(f(pair.swapped(), b, a, jax.lax.stop_gradient(s)), pair.mask)
+            return as_row, as_neighbour
+
+        _, pull = jax.vjp(both_roles, dr, a, s)
+        obar_rows = _per_pair(obar_k, idx_k.shape)
+        dr_bar, a_bar, s_bar = pull((obar_rows, obar_b))
+        a_bar = _sum_over_pairs(a_bar)
+        a_bar["x"] = a_bar["x"] + jnp.sum(dr_bar, axis=1)
+        return a_bar, s_bar
+
+    return _rowwise_with_shared(one_block, (fields, idx, obar), block, n)
+
+
+def _adjoint_symmetric(g, weight, parity, geometry, block, fields, shared, idx, obar):
+    """Cotangents for a sum within one system whose pair term is ``w_b g(a, b)`` with
+    ``g(b, a) = parity * g(a, b)`` (``parity = -1`` for the antisymmetric pair forces of
+    eq. 10 and eq. 14, ``+1`` for eq. 5 and eq. 11).  Then ``k``'s neighbour role is
+    ``parity w_k g(k, b)``: one evaluation of ``g`` serves both roles, and its derivative
+    is taken once, with the cotangent ``w_b obar_k + parity w_k obar_b``.  The parameters
+    see each pair twice that way (once per role); over a symmetric list the two halves are
+    equal, so their cotangent is halved."""
+    n = jax.tree_util.tree_leaves(fields)[0].shape[0]
+
+    def one_block(args):
+        fields_k, idx_k, obar_k = args
+        valid = idx_k < n
+        j = jnp.where(valid, idx_k, 0)
+        b = _gather(fields, j)
+        obar_b = _gather(obar, j)
+        a = _per_pair(fields_k, idx_k.shape)
+        dr = geometry.displacement(a["x"], b["x"])
+        s = shared
+
+        def both_roles(dr, a, s):
+            pair = geometry.pairs_of(dr, valid)
+            term = _masked(g(pair, a, b, s), pair.mask)
+            as_row = _scale(term, b[weight])
+            as_neighbour = _scale(term, parity * a[weight])
+            return as_row, as_neighbour
+
+        _, pull = jax.vjp(both_roles, dr, a, s)
+        dr_bar, a_bar, s_bar = pull((_per_pair(obar_k, idx_k.shape), obar_b))
+        a_bar = _sum_over_pairs(a_bar)
+        a_bar["x"] = a_bar["x"] + jnp.sum(dr_bar, axis=1)
+        # the parameters' cotangent counted each pair in both roles: by the symmetry of
+        # the list, both halves are equal
+        return a_bar, tree_map(lambda q: 0.5 * q, s_bar)
+
+    return _rowwise_with_shared(one_block, (fields, idx, obar), block, n)
+
+
+def _rowwise_with_shared(one_block, rows, block, pad_index):
+    """:func:`_rowwise` for a ``one_block`` that returns ``(per-row cotangents, shared
+    cotangent)``: per-row ones are concatenated, the shared ones summed over blocks."""
+    n = jax.tree_util.tree_leaves(rows)[0].shape[0]
+    if block is None or block >= n:
+        return one_block(rows)
+    n_blocks = -(-n // block)
+    pad = n_blocks * block - n
+
+    def split(a):
+        return _split_blocks(a, n_blocks, block, pad, pad_index)
+
+    per_row, shared = jax.lax.map(one_block, tree_map(split, rows))
+    per_row = tree_map(lambda a: a.reshape((n_blocks * block,) + a.shape[2:])[:n], per_row)
+    return per_row, tree_map(lambda a: jnp.sum(a, axis=0), shared)
+
+
+def _adjoint_cross(f, geometry, block, rows, cols, shared, idx, transpose, obar):
+    """Cotangents of ``rows``, ``cols`` and ``shared`` for a sum of one system's rows over
+    another system's particles: one pass over the rows, one over the columns."""
+    n_rows = jax.tree_util.tree_leaves(rows)[0].shape[0]
+    n_cols = jax.tree_util.tree_leaves(cols)[0].shape[0]
+
+    def row_block(args):
+        rows_k, idx_k, obar_k = args
+        valid = idx_k < n_cols
+        b = _gather(cols, jnp.where(valid, idx_k, 0))
+        a = _per_pair(rows_k, idx_k.shape)
+        dr = geometry.displacement(a["x"], b["x"])
+        s = shared
+
+        def as_row(dr, a, s):
+            pair = geometry.pairs_of(dr, valid)
+            return _masked(f(pair, a, b, s), pair.mask)
+
+        _, pull = jax.vjp(as_row, dr, a, s)
+        dr_bar, a_bar, s_bar = pull(_per_pair(obar_k, idx_k.shape))
+        a_bar = _sum_over_pairs(a_bar)
+        a_bar["x"] = a_bar["x"] + jnp.sum(dr_bar, axis=1)
+        return a_bar, s_bar
+
+    def col_block(args):
+        cols_k, idx_k = args
+        valid = idx_k < n_rows
+        j = jnp.where(valid, idx_k, 0)
+        a = _gather(rows, j)
+        obar_a = _gather(obar, j)
+        b = _per_pair(cols_k, idx_k.shape)
+        dr = geometry.displacement(a["x"], b["x"])
+
+        def as_neighbour(dr, b):
+            pair = geometry.pairs_of(dr, valid)
+            return _masked(f(pair, a, b, shared), pair.mask)
+
+        _, pull = jax.vjp(as_neighbour, dr, b)
+        dr_bar, b_bar = pull(obar_a)
+        b_bar = _sum_over_pairs(b_bar)
+        b_bar["x"] = b_bar["x"] - jnp.sum(dr_bar, axis=1)
+        return b_bar
+
+    rows_bar, shared_bar = _rowwise_with_shared(row_block, (rows, idx, obar), block, n_cols)
+    cols_bar = _rowwise(col_block, (cols, transpose), block, n_rows)
+    return rows_bar, cols_bar, shared_bar
+
+
+def _custom_sum(f, geometry, block, structure, same, weight=None, parity=None):
+    """The pair sum of ``f`` with its adjoint attached."""
+    rows_def, cols_def, shared_def, n_rows_leaves, n_cols_leaves, n_shared = structure
+
+    def unflatten(flat):
+        rows = jax.tree_util.tree_unflatten(rows_def, flat[:n_rows_leaves])
+        k = n_rows_leaves
+        if same:
+            cols = rows
+        else:
+            cols = jax.tree_util.tree_unflatten(cols_def, flat[k : k + n_cols_leaves])
+            k += n_cols_leaves
+        shared = jax.tree_util.tree_unflatten(shared_def, flat[k : k + n_shared])
+        return rows, cols, shared, flat[k + n_shared :]
+
+    full = _weighted(f, weight)
+
+    def forward(*flat):
+        rows, cols, shared, (idx, *_) = unflatten(flat)
+        return _forward(full, geometry, None, rows, cols, shared, idx)
+
+    def adjoint(flat, obar):
+        rows, cols, shared, (idx, *transpose) = unflatten(flat)
+        leaves = jax.tree_util.tree_leaves
+        if same and parity is not None:
+            fields_bar, shared_bar = _adjoint_symmetric(
+                f, weight, parity, geometry, block, rows, shared, idx, obar
+            )
+            return (*leaves(fields_bar), *leaves(shared_bar))
+        if same:
+            fields_bar, shared_bar = _adjoint_self(full, geometry, block, rows, shared, idx, obar)
+            return (*leaves(fields_bar), *leaves(shared_bar))
+        rows_bar, cols_bar, shared_bar = _adjoint_cross(
+            full, geometry, block, rows, cols, shared, idx, transpose[0], obar
+        )
+        return (*leaves(rows_bar), *leaves(cols_bar), *leaves(shared_bar))
+
+    n_linear = n_rows_leaves + (0 if same else n_cols_leaves) + n_shared
+    return custom_adjoint(forward, adjoint, n_linear=n_linear)
+
+
+def pair_sum(
+    f: Callable,
+    rows: dict,
+    cols: dict | None,
+    pairs: PairList,
+    geometry: Geometry,
+    shared=(),
+    *,
+    weight: str | None = None,
+    parity: int | None = None,
+    adjoint: bool = True,
+    block: int | None = None,
+):
+    """``out_a = sum_{b in N(a)} w_b f(pair_ab, a, b, shared)`` over a neighbour list.
+
+    Args:
+      f: ``f(pair: PairGeometry, a, b, shared) -> pytree of [B, K, ...]`` per-pair terms;
+        ``a`` and ``b`` are dicts of the rows' and neighbours' fields.  Must be a
+        hashable function (a module-level function or a ``functools.partial`` of one)
+        that is finite for any pair (padding and ``r = 0`` included).
+      rows: dict of ``[N_a, ...]`` float arrays; ``rows["x"]`` are the positions the pair
+        geometry is computed from.
+      cols: the neighbours' fields (same keys as ``f`` reads), or ``None`` for a sum within
+        one system (``cols = rows``, symmetric list).
+      pairs: the :class:`PairList` of ``rows`` against ``cols``.
+      geometry: kernel, smoothing length and domain (:meth:`Geometry.of`).
+      shared: pytree of arrays every pair sees (parameters).
+      weight: key of the neighbours' field ``w_b`` that multiplies ``f`` (``None``: 1).
+      parity: for a sum within one system, ``-1`` if ``f(b, a) = -f(a, b)`` (pair forces)
+        or ``+1`` if ``f(b, a) = f(a, b)``; the adjoint then evaluates ``f`` once per pair
+        for both roles.  ``None``: no symmetry assumed (two evaluations).
+      adjoint: attach the custom adjoint (else autodiff transposes the forward).
+      block: rows per block of the adjoint's passes (``None``: all at once); the forward
+        runs over all rows at once (faster on the CPU than blocks).
+    Returns:
+      pytree of ``[N_a, ...]`` sums.
+    """
+    same = cols is None
+    if parity is not None and (not same or weight is None):
+        raise ValueError("pair_sum: parity needs a sum within one system and a weight")
+    if not adjoint:
+        full = _weighted(f, weight)
+        return _forward(full, geometry, None, rows, rows if same else cols, shared, pairs.idx)
+    rows_leaves, rows_def = jax.tree_util.tree_flatten(rows)
+    cols_leaves, cols_def = jax.tree_util.tree_flatten(rows if same else cols)
+    shared_leaves, shared_def = jax.tree_util.tree_flatten(shared)
+    if not same and pairs.transpose is None:
+        raise ValueError("pair_sum between two systems needs the transposed neighbour list")
+    structure = (
+        rows_def,
+        cols_def,
+        shared_def,
+        len(rows_leaves),
+        len(cols_leaves),
+        len(shared_leaves),
+    )
+    fn = _custom_sum(f, geometry, block, structure, same, weight, parity)
+    dtype = rows_leaves[0].dtype
+    shared_leaves = [jnp.asarray(s, dtype) for s in shared_leaves]
+    args = [*rows_leaves, *([] if same else cols_leaves), *shared_leaves, pairs.idx]
+    if not same:
+        args.append(pairs.transpose)
+    return fn(*args)

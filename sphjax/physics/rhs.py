@@ -1,0 +1,407 @@
+"""The right-hand side: each system's update stage, then a sum over interactions.
+
+``evaluate(state, neighbors, model, params)`` returns the State with ``acceleration``
+(``Dv/Dt``), ``density_rate`` (``Drho/Dt``), ``pressure``, ``shift_acceleration`` and, for
+summation density and walls, ``density`` filled in.  It is pure: arrays and neighbour
+indices in, arrays out.
+
+1. **Update stage**, in a fixed order: the fluid's density and pressure (eqs. 5/11, 12),
+   the walls' pressure, density and velocity extrapolated from the fluid (Adami et al.
+   2012), the solid's correction matrix, deformation gradient and stress (eqs. 15-19).
+2. **Interactions**: for every ordered pair of systems with an entry in
+   :data:`sphjax.physics.interactions.INTERACTIONS`, the accelerations of the first
+   system's particles due to the second's, summed; then gravity.
+
+Each system owns one contiguous block of the State's particles (:func:`system_blocks`).
+Neighbour lists exist only for the pairs of systems that interact
+(:func:`neighbor_pairs`): the current configuration for fluid and walls, split from one
+jax-md cell list, and the reference configuration within a solid.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jax.ad_checkpoint import checkpoint_name
+
+from sphjax.core.neighbors import (
+    NeighborSearch,
+    capacity,
+    measured_capacity,
+    reference_neighbors,
+    split_list,
+)
+from sphjax.core.pytree import pytree_dataclass
+from sphjax.core.state import Kind, State
+from sphjax.physics import pairs as pairs_module
+from sphjax.physics.boundary.system import WallSystem, update_wall
+from sphjax.physics.fluid.system import FluidSystem, update_fluid
+from sphjax.physics.interactions import INTERACTIONS, UPDATE_PAIRS
+from sphjax.physics.pairs import Geometry, PairList
+from sphjax.physics.solid.system import SolidSystem, update_solid
+
+NEIGHBOR_IDX = "sphjax_neighbor_idx"
+
+
+# ---------------------------------------------------------------------------- layout
+
+
+def system_blocks(kind, model) -> tuple[tuple[int, int], ...]:
+    """``(start, stop)`` of each system's particles in the State (concrete ``kind``)."""
+    kind = np.asarray(kind)
+    blocks, start = [], 0
+    for system in model.systems:
+        count = int(np.isin(kind, [int(k) for k in system.kinds]).sum())
+        own = kind[start : start + count]
+        if count and not np.isin(own, [int(k) for k in system.kinds]).all():
+            raise ValueError(
+                "the State's particles must be grouped by system in the order of "
+                "Model.systems (fluid, wall, solid); sort them by kind"
+            )
+        blocks.append((start, start + count))
+        start += count
+    if start != kind.shape[0]:
+        present = sorted(set(kind.tolist()))
+        raise ValueError(
+            f"the State has particle kinds {present} but Model.systems own the kinds "
+            f"{list(model.particle_kinds)}; add the missing system to Model.systems"
+        )
+    return tuple(blocks)
+
+
+def neighbor_pairs(model) -> tuple[tuple[int, int], ...]:
+    """Ordered pairs ``(i, j)`` of systems whose neighbour list is needed."""
+    wanted = set(INTERACTIONS) | UPDATE_PAIRS
+    return tuple(
+        (i, j)
+        for i, a in enumerate(model.systems)
+        for j, b in enumerate(model.systems)
+        if (type(a), type(b)) in wanted
+    )
+
+
+# ---------------------------------------------------------------------------- neighbours
+
+
+@pytree_dataclass(static=("blocks", "union", "capacities"))
+class Neighbors:
+    """Neighbour data of one simulation.
+
+    Attributes:
+      search: the jax-md dense list over the particles of the systems that interact in
+        the current configuration (``None`` when there are none).
+      pairs: ``{(i, j): PairList}`` for every pair of systems of :func:`neighbor_pairs`.
+      overflow: True when a split list ran out of room.
+      blocks: each system's ``(start, stop)`` in the State.
+      union: ``(start, stop)`` of the particles in ``search``.
+      capacities: ``((i, j), width)`` of each split list.
+    """
+
+    search: object
+    pairs: dict
+    overflow: jax.Array
+    blocks: tuple
+    union: tuple | None
+    capacities: tuple
+
+
+_SEARCHES: dict = {}
+
+
+def neighbor_search(model) -> NeighborSearch:
+    """The jax-md search of ``model`` (one per Model and float precision)."""
+    key = (model, bool(jax.config.jax_enable_x64))
+    if key not in _SEARCHES:
+        _SEARCHES[key] = NeighborSearch(model, x64=key[1])
+    return _SEARCHES[key]
+
+
+def _current(model):
+    return [i for i, s in enumerate(model.systems) if s.current_configuration]
+
+
+def _local(block, union):
+    return (block[0] - union[0], block[1] - union[0])
+
+
+def build_neighbors(state: State, model, extra_capacity: int = 0) -> Neighbors:
+    """Allocate neighbour data for concrete ``state`` (outside ``jit``)."""
+    blocks = system_blocks(state.kind, model)
+    wanted = neighbor_pairs(model)
+    current = [i for i in _current(model) if blocks[i][1] > blocks[i][0]]
+    search, union, capacities = None, None, []
+    if current:
+        union = (blocks[current[0]][0], blocks[current[-1]][1])
+        search = neighbor_search(model).allocate(
+            state.position[union[0] : union[1]], extra_capacity
+        )
+        for i, j in wanted:
+            if i in current and j in current and len(current) > 1:
+                width = measured_capacity(
+                    search.idx,
+                    _local(blocks[i], union),
+                    _local(blocks[j], union),
+                    model.neighbor_capacity,
+                    extra_capacity,
+                )
+                capacities.append(((i, j), min(width, capacity(search))))
+    neighbors = Neighbors(
+        search=search,
+        pairs={},
+        overflow=jnp.asarray(False),
+        blocks=blocks,
+        union=union,
+        capacities=tuple(capacities),
+    )
+    pair_lists = _split(neighbors, model)
+    for i, j in wanted:
+        system = model.systems[i]
+        if not system.current_configuration and i == j:
+            start, stop = blocks[i]
+            members = np.arange(start, stop)
+            idx = reference_neighbors(state.reference_position, members, model)
+            n = state.position.shape[0]
+            local = np.where(idx < n, idx - start, stop - start).astype(np.int32)
+            pair_lists[(i, j)] = PairList(jnp.asarray(local), None, stop - start, stop - start)
+    return dataclasses.replace(
+        neighbors, pairs={**pair_lists}, overflow=_split_overflow(neighbors, model)
+    )
+
+
+def _split(neighbors: Neighbors, model) -> dict:
+    """The current-configuration PairLists from ``neighbors.search``."""
+    if neighbors.search is None:
+        return {}
+    blocks, union = neighbors.blocks, neighbors.union
+    widths = dict(neighbors.capacities)
+    idx = neighbors.search.idx
+    out = {}
+    for i, j in neighbor_pairs(model):
+        if (i, j) in widths:
+            n_i, n_j = blocks[i][1] - blocks[i][0], blocks[j][1] - blocks[j][0]
+            forward, _ = split_list(
+                idx, _local(blocks[i], union), _local(blocks[j], union), widths[(i, j)]
+            )
+            backward, _ = split_list(
+                idx, _local(blocks[j], union), _local(blocks[i], union), widths[(j, i)]
+            )
+            out[(i, j)] = PairList(forward, backward, n_i, n_j)
+        elif i == j and model.systems[i].current_configuration and blocks[i][1] > blocks[i][0]:
+            n = blocks[i][1] - blocks[i][0]
+            out[(i, j)] = PairList(idx.astype(jnp.int32), None, n, n)
+    return out
+
+
+def _current_keys(neighbors: Neighbors, model):
+    return {k for k in neighbors.pairs if model.systems[k[0]].current_configuration}
+
+
+def _split_overflow(neighbors: Neighbors, model):
+    if neighbors.search is None:
+        return jnp.asarray(False)
+    blocks, union = neighbors.blocks, neighbors.union
+    flags = [jnp.asarray(False)]
+    for (i, j), width in neighbors.capacities:
+        flags.append(
+            split_list(
+                neighbors.search.idx, _local(blocks[i], union), _local(blocks[j], union), width
+            )[1]
+        )
+    return jnp.any(jnp.stack(flags))
+
+
+def update_neighbors(position, neighbors: Neighbors, model, rebuild=False) -> Neighbors:
+    """Neighbours at ``position`` (inside ``jit``): the jax-md list is updated (rebuilt
+    when a particle moved half the skin, or always with ``rebuild``) and, when it was
+    rebuilt, split again into the lists per pair of systems."""
+    if neighbors.search is None:
+        return neighbors
+    search = neighbor_search(model)
+    union = neighbors.union
+    x = position[union[0] : union[1]]
+    old = neighbors.search
+    new = (search.rebuild if rebuild else search.update)(x, old)
+    new = new.set(idx=checkpoint_name(new.idx, NEIGHBOR_IDX))
+    refreshed = dataclasses.replace(neighbors, search=new)
+    if not neighbors.capacities:
+        pair_lists = {**neighbors.pairs, **_split(refreshed, model)}
+        return dataclasses.replace(refreshed, pairs=pair_lists)
+
+    def split(_):
+        return _split(refreshed, model), _split_overflow(refreshed, model)
+
+    def keep(_):
+        current = {k: v for k, v in neighbors.pairs.items() if k in _current_keys(neighbors, model)}
+        return current, neighbors.overflow
+
+    moved = jnp.any(new.reference_position != old.reference_position) if not rebuild else True
+    if rebuild:
+        current, overflow = split(None)
+    else:
+        current, overflow = jax.lax.cond(moved, split, keep, None)
+    current = jax.tree_util.tree_map(lambda a: checkpoint_name(a, NEIGHBOR_IDX), current)
+    return dataclasses.replace(
+        refreshed, pairs={**neighbors.pairs, **current}, overflow=overflow | neighbors.overflow
+    )
+
+
+def overflowed(neighbors: Neighbors):
+    """True when any neighbour list of ``neighbors`` ran out of room."""
+    if neighbors.search is None:
+        return jnp.asarray(False)
+    return jnp.asarray(neighbors.search.did_buffer_overflow) | neighbors.overflow
+
+
+# ---------------------------------------------------------------------------- evaluation
+
+
+@dataclasses.dataclass(frozen=True)
+class Context:
+    """What the stages share: Params, pair geometry and the pair-sum settings."""
+
+    params: object
+    geometry: Geometry
+    adjoint: bool
+    block: int | None
+    fluid_pairs: PairList | None = None
+
+    def pair_sum(self, f, rows, cols, pairs, shared=(), weight=None, parity=None):
+        return pairs_module.pair_sum(
+            f,
+            rows,
+            cols,
+            pairs,
+            self.geometry,
+            shared,
+            weight=weight,
+            parity=parity,
+            adjoint=self.adjoint,
+            block=self.block,
+        )
+
+
+def _check_params(model, params):
+    for system in model.systems:
+        group = "solid" if isinstance(system, SolidSystem) else "fluid"
+        if object.__getattribute__(params, group) is None:
+            raise ValueError(
+                f"the model has a {type(system).__name__} but Params has no {group} "
+                f"parameters; build them with make_params(dim, {group}=True, ...)"
+            )
+
+
+def evaluate(state: State, neighbors: Neighbors, model, params, density_step=None) -> State:
+    """Rates of change of ``state`` (eqs. 5, 10-12 for fluids; 14-19 for solids).
+
+    ``density_step``: with continuity density (eq. 11), first advance the density by
+    ``density_step * Drho/Dt`` evaluated at the given positions and velocities, then
+    compute pressure and accelerations from the new density.  The integrator passes
+    ``dt`` here, which staggers density and velocity in time (density at whole steps,
+    velocity at half steps), the stable leapfrog for the acoustic system; it also adds
+    the transport-velocity stress of the drift just taken.  ``None`` evaluates the plain
+    rates (the ODE right-hand side).
+    """
+    ctx = Context(params, Geometry.of(model), model.pair_adjoint, model.pair_block)
+    views = update_stage(state, neighbors, model, params, density_step, ctx)
+    return _assemble(state, views, interaction_stage(views, neighbors, model, ctx))
+
+
+def update_stage(state: State, neighbors: Neighbors, model, params, density_step=None, ctx=None):
+    """Stage 1: each system's fields after its update, in the fixed order fluids, walls,
+    solids.  Returns one dict per system (``x, v, m, rho`` and what the update adds:
+    fluid ``p, drho``; wall ``p, rho, v_viscous``; solid ``L0, F, P, PL0``)."""
+    _check_params(model, params)
+    if ctx is None:
+        ctx = Context(params, Geometry.of(model), model.pair_adjoint, model.pair_block)
+    blocks = neighbors.blocks
+    views = [
+        _view(state, block, system, density_step)
+        for system, block in zip(model.systems, blocks, strict=True)
+    ]
+    for i, system in enumerate(model.systems):
+        if isinstance(system, FluidSystem) and _size(blocks[i]):
+            boundaries = [
+                (views[j], neighbors.pairs[(i, j)])
+                for j, other in enumerate(model.systems)
+                if isinstance(other, WallSystem) and (i, j) in neighbors.pairs
+            ]
+            fluid_ctx = dataclasses.replace(ctx, fluid_pairs=neighbors.pairs[(i, i)])
+            views[i] = update_fluid(system, views[i], boundaries, fluid_ctx, density_step)
+    for i, system in enumerate(model.systems):
+        if isinstance(system, WallSystem) and _size(blocks[i]):
+            for j, fluid_system in enumerate(model.systems):
+                if (i, j) in neighbors.pairs and isinstance(fluid_system, FluidSystem):
+                    pairs = neighbors.pairs[(i, j)]
+                    views[i] = update_wall(system, views[i], fluid_system, views[j], pairs, ctx)
+    for i, system in enumerate(model.systems):
+        if isinstance(system, SolidSystem) and _size(blocks[i]):
+            views[i] = update_solid(system, views[i], neighbors.pairs[(i, i)], ctx)
+    return views
+
+
+def interaction_stage(views, neighbors: Neighbors, model, ctx):
+    """Stage 2: ``(acceleration, shift)`` of each system, summed over its interactions,
+    gravity included (walls excepted; clamped solid particles get none)."""
+    blocks, dtype = neighbors.blocks, views[0]["x"].dtype
+    rates = []
+    for i, system in enumerate(model.systems):
+        n = _size(blocks[i])
+        acceleration = jnp.zeros((n, model.dim), dtype)
+        shift = jnp.zeros_like(acceleration)
+        for j, other in enumerate(model.systems):
+            interaction = INTERACTIONS.get((type(system), type(other)))
+            if interaction is None or (i, j) not in neighbors.pairs or not n:
+                continue
+            if not _size(blocks[j]):
+                continue
+            out = interaction(system, views[i], other, views[j], neighbors.pairs[(i, j)], ctx)
+            acceleration = acceleration + out["a"]
+            if "shift" in out:
+                shift = shift + out["shift"]
+        if not isinstance(system, WallSystem):
+            acceleration = acceleration + ctx.params.gravity
+        if isinstance(system, SolidSystem):
+            acceleration = jnp.where(views[i]["free"][:, None], acceleration, 0.0)
+        rates.append((acceleration, shift))
+    return rates
+
+
+def _size(block):
+    return block[1] - block[0]
+
+
+def _view(state: State, block, system, density_step):
+    """The fields of one system's block of ``state``."""
+    s = slice(*block)
+    view = {
+        "x": state.position[s],
+        "v": state.velocity[s],
+        "m": state.mass[s],
+        "rho": state.density[s],
+    }
+    if isinstance(system, FluidSystem) and system.transport_velocity is not None:
+        if density_step is not None:
+            view["dv"] = 0.5 * density_step * state.shift_acceleration[s]
+    if isinstance(system, SolidSystem):
+        free = state.kind[s] == Kind.SOLID
+        view.update(X=state.reference_position[s], V=state.volume[s], free=free)
+    return view
+
+
+def _assemble(state: State, views, rates) -> State:
+    acceleration = jnp.concatenate([a for a, _ in rates], axis=0)
+    shift = jnp.concatenate([s for _, s in rates], axis=0)
+
+    def field(name):
+        return jnp.concatenate([v.get(name, jnp.zeros_like(v["rho"])) for v in views])
+
+    return state.replace(
+        acceleration=acceleration,
+        density_rate=field("drho"),
+        density=field("rho"),
+        pressure=field("p"),
+        shift_acceleration=shift,
+    )

@@ -1,0 +1,1 @@
+"""Elastic solids: total-Lagrangian SPH (formulation eqs. 13-19)."""

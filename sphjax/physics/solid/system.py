@@ -1,0 +1,107 @@
+"""The elastic solid system: total-Lagrangian SPH (formulation eqs. 13-19; O'Connor &
+Rogers 2021), and its update stage.
+
+Every quantity is evaluated against the reference configuration ``X`` with the reference
+neighbours found once:
+
+    L0_a = ( -sum_b V0_b grad0_a W(X_ab) X_ab^T )^-1                         (eq. 15)
+    F_a  = -sum_b V0_b x_ab (L0_a grad0_a W(X_ab))^T                         (eq. 16)
+    E_a  = 1/2 (F_a^T F_a - I),  S_a = lambda tr(E_a) I + 2 mu E_a           (eqs. 17-18)
+    mu = E / (2 (1 + nu)),  lambda = E nu / ((1 + nu)(1 - 2 nu))             (eq. 19)
+    P_a  = F_a S_a
+    Dv_a/Dt = sum_b m0_b (P_a L0_a / rho0_a^2 + P_b L0_b / rho0_b^2) grad0_a W(X_ab)
+              + f_a^PF / m0_a + g                                            (eq. 14)
+
+with ``X_ab = X_a - X_b`` and ``x_ab = x_a - x_b``.  The minus signs in eqs. 15-16 make
+``L0 ~ I`` and ``F = I`` on the undeformed configuration.  In 2D the Lamé constants of
+eq. 19 give plane strain.  The momentum equation is the solid-solid interaction
+(:mod:`sphjax.physics.interactions`); it is the variational discretisation of the St
+Venant-Kirchhoff energy: pair forces are antisymmetric (linear momentum is conserved
+exactly) and the energy is frame-indifferent.
+
+The system holds solid particles and clamped ones (kind ``CLAMPED``), whose motion is
+prescribed; clamped particles take part as neighbours with their own ``F``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+from collections.abc import Callable
+from typing import Any
+
+import jax.numpy as jnp
+
+from sphjax.core.space import displacement_fn
+from sphjax.core.state import Kind
+from sphjax.physics.solid.correction import (
+    corrected_kernel_gradient,
+    correction_matrix,
+    correction_moment,
+)
+from sphjax.physics.solid.deformation import deformation_term
+from sphjax.physics.solid.material import StVenantKirchhoff
+from sphjax.physics.solid.penalty import PenaltyForce
+
+
+@dataclasses.dataclass(frozen=True)
+class SolidSystem:
+    """A total-Lagrangian elastic solid (kinds ``SOLID`` and ``CLAMPED``); its parameters
+    are ``Params.solid``.
+
+    Attributes:
+      material: :class:`~sphjax.StVenantKirchhoff`.
+      penalty: ``None`` or :class:`~sphjax.PenaltyForce` (hourglass control, eq. 14).
+      clamped_motion: ``None`` (clamped particles stay put) or a hashable function
+        ``(t, X) -> x`` giving the prescribed positions of clamped particles.
+    """
+
+    material: object = StVenantKirchhoff()
+    penalty: object = None
+    clamped_motion: Callable[[Any, Any], Any] | None = None
+
+    kinds = (Kind.SOLID, Kind.CLAMPED)
+    current_configuration = False
+
+    def __post_init__(self):
+        if not hasattr(self.material, "pk1"):
+            raise ValueError(
+                f"SolidSystem.material must be StVenantKirchhoff(), got {self.material!r}"
+            )
+        if self.penalty is not None and not isinstance(self.penalty, PenaltyForce):
+            raise ValueError(
+                f"SolidSystem.penalty must be None or PenaltyForce(), got {self.penalty!r}"
+            )
+
+    def replace(self, **changes) -> SolidSystem:
+        return dataclasses.replace(self, **changes)
+
+
+def _moment_summand(pair, a, b, shared):
+    """Eq. 15's pair term per unit neighbour volume (symmetric under ``a <-> b``)."""
+    return correction_moment(pair, jnp.ones_like(pair.r))
+
+
+def _deformation_summand(pair, a, b, shared, *, domain):
+    dx = displacement_fn(domain)(a["xc"], b["xc"])
+    dx = dx * pair.mask[..., None]
+    return deformation_term(dx, corrected_kernel_gradient(a["L0"], pair.grad_w), b["V"])
+
+
+def update_solid(system: SolidSystem, solid: dict, pairs, ctx):
+    """Update stage of a solid: ``L0`` (eq. 15), ``F`` (eq. 16) and the stress ``P L0``.
+
+    Args:
+      solid: fields ``X`` (reference positions), ``x`` (current), ``V`` (reference
+        volumes).
+      pairs: the reference-configuration list within the solid.
+    Returns:
+      ``solid`` with ``L0``, ``F``, ``P`` and ``P L0`` (``[n, d, d]``).
+    """
+    rows = {"x": solid["X"], "V": solid["V"]}
+    L0 = correction_matrix(ctx.pair_sum(_moment_summand, rows, None, pairs, weight="V", parity=1))
+    summand = functools.partial(_deformation_summand, domain=ctx.geometry.domain)
+    rows = {"x": solid["X"], "xc": solid["x"], "V": solid["V"], "L0": L0}
+    F = ctx.pair_sum(summand, rows, None, pairs)
+    P = system.material.pk1(F, ctx.params.solid)
+    return {**solid, "L0": L0, "F": F, "P": P, "PL0": P @ L0}
