@@ -160,7 +160,7 @@ def calibrate(
         raise ValueError(f"mode must be one of {MODES}, got {mode!r}")
     if mode == "auto":
         mode = "forward" if len(names) <= FORWARD_MODE_MAX_FIELDS else "reverse"
-    fields = {f.name for f in dataclasses.fields(Params)}
+    fields = {name for name, _ in base_params.items()}
     for name in names:
         if name not in fields:
             raise ValueError(

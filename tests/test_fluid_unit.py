@@ -121,3 +121,34 @@ def test_switching_float64_off_and_on_within_a_session():
         np.testing.assert_array_equal(finals[True][0], finals[True][1])
     finally:
         jax.config.update("jax_enable_x64", old)
+
+
+def test_linear_equation_of_state_and_its_inverse():
+    """``LinearEOS``: ``p = c0^2 (rho - rho0) + p0 - p_background`` and back."""
+    params = sphjax.make_params(
+        2,
+        reference_density=1000.0,
+        sound_speed=20.0,
+        reference_pressure=100.0,
+        background_pressure=30.0,
+    ).fluid
+    eos = sphjax.LinearEOS()
+    rho = jnp.asarray([990.0, 1000.0, 1012.5])
+    p = eos.pressure(rho, params)
+    np.testing.assert_allclose(p, 400.0 * (rho - 1000.0) + 70.0, rtol=1e-12)
+    np.testing.assert_allclose(eos.density(p, params), rho, rtol=1e-12)
+
+
+def test_linear_eos_runs_like_tait_with_gamma_one():
+    """Tait with ``gamma = 1`` is the linear law, so a Taylor-Green run with
+    ``LinearEOS`` reproduces it to round-off; ``gamma = 7`` differs (the test could fail)."""
+    case = sphjax.cases.taylor_green(n=8, gamma=1.0)
+    fluid = case.model.systems[0]
+
+    def final(eos):
+        model = case.model.replace(systems=(fluid.replace(equation_of_state=eos),))
+        return sphjax.simulate(case.replace(model=model), n_steps=20).final.velocity
+
+    linear = final(sphjax.LinearEOS())
+    np.testing.assert_allclose(linear, final(sphjax.TaitEOS(gamma=1.0)), rtol=1e-5, atol=1e-7)
+    assert float(jnp.max(jnp.abs(linear - final(sphjax.TaitEOS(gamma=7.0))))) > 1e-4
