@@ -13,22 +13,50 @@ from sphjax._xla import apply_default_flags
 
 apply_default_flags()  # before any JAX backend exists; see sphjax/_xla.py
 
-from sphjax import cases, io, kernels
-from sphjax._solver import KickDriftKick
-from sphjax.calibrate import CalibrationResult, calibrate
-from sphjax.case import Case
-from sphjax.diffrax_solver import diffeqsolve_case
-from sphjax.integrate import (
-    NeighborOverflowError,
-    SimulationError,
-    Trajectory,
-    kick_drift_kick,
-    simulate,
-)
-from sphjax.io import TrajectoryWriter, read_trajectory
-from sphjax.rhs import Neighbors, evaluate
-from sphjax.state import Domain, Kind, Model, Params, State, make_params, make_state
-from sphjax.timestep import stable_time_step
+# The public names are imported on first use (PEP 562), so ``import sphjax`` and the
+# ``sphjax`` command's --help do not pay for importing JAX.
+_SUBMODULES = ("cases", "io", "kernels")
+_NAMES = {
+    "KickDriftKick": "sphjax._solver",
+    "CalibrationResult": "sphjax.calibrate",
+    "calibrate": "sphjax.calibrate",
+    "Case": "sphjax.case",
+    "diffeqsolve_case": "sphjax.diffrax_solver",
+    "NeighborOverflowError": "sphjax.integrate",
+    "SimulationError": "sphjax.integrate",
+    "Trajectory": "sphjax.integrate",
+    "kick_drift_kick": "sphjax.integrate",
+    "simulate": "sphjax.integrate",
+    "TrajectoryWriter": "sphjax.io",
+    "read_trajectory": "sphjax.io",
+    "Neighbors": "sphjax.rhs",
+    "evaluate": "sphjax.rhs",
+    "Domain": "sphjax.state",
+    "Kind": "sphjax.state",
+    "Model": "sphjax.state",
+    "Params": "sphjax.state",
+    "State": "sphjax.state",
+    "make_params": "sphjax.state",
+    "make_state": "sphjax.state",
+    "stable_time_step": "sphjax.timestep",
+}
+
+
+def __getattr__(name):
+    import importlib
+
+    if name in _SUBMODULES:
+        return importlib.import_module(f"sphjax.{name}")
+    if name in _NAMES:
+        value = getattr(importlib.import_module(_NAMES[name]), name)
+        globals()[name] = value
+        return value
+    raise AttributeError(f"module 'sphjax' has no attribute {name!r}")
+
+
+def __dir__():
+    return sorted(set(globals()) | set(__all__))
+
 
 __version__ = "0.1.0"
 

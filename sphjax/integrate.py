@@ -300,8 +300,9 @@ def simulate(
       case: from ``sphjax.cases``.
       params: differentiable parameters (default ``case.params``).
       n_steps: number of steps; or give ``t_end`` (default ``case.t_end``).
-      save_every: steps between saved frames (default: only the last frame);
-        ``n_steps`` must be a multiple of it.
+      save_every: steps between saved frames (default: only the last frame): frames at
+        the multiples of ``save_every`` and, when it does not divide ``n_steps``, a last
+        one at ``n_steps`` (``Trajectory.times`` gives the true times).
       dt: time step (default ``case.dt``); rejected above the stability limit.
       state: initial state (default ``case.state``).
       checkpoint_every: in reverse mode every step is rematerialised (only its input
@@ -313,7 +314,8 @@ def simulate(
         runs only); used to append to HDF5 as the run goes.
       progress: ``f(n)`` called with the number of steps just completed.
     Returns:
-      :class:`Trajectory` with ``n_steps // save_every + 1`` frames.
+      :class:`Trajectory` with ``n_steps // save_every + 1`` frames, one more when
+      ``save_every`` does not divide ``n_steps``.
     """
     params = case.params if params is None else params
     state = case.state if state is None else state
@@ -328,11 +330,11 @@ def simulate(
         raise ValueError(f"n_steps must be a positive integer, got {n_steps!r}")
     n_steps = int(n_steps)
     save_every = n_steps if save_every is None else int(save_every)
-    if save_every < 1 or n_steps % save_every:
-        raise ValueError(f"save_every={save_every} must be a positive divisor of n_steps={n_steps}")
+    if save_every < 1:
+        raise ValueError(f"save_every must be a positive integer, got {save_every}")
     if checkpoint_every is not None and int(checkpoint_every) < 1:
         raise ValueError(f"checkpoint_every must be a positive integer, got {checkpoint_every}")
-    n_frames = n_steps // save_every
+    n_frames, rest = divmod(n_steps, save_every)
     traced = _is_traced(params, state, dt)
     if not traced:
         _check_finite(state)
@@ -354,8 +356,13 @@ def simulate(
             progress=progress,
             steps_per_chunk=steps_per_chunk,
         )
-    states = run(state, neighbors, dt, params, model, save_every=save_every, n_frames=n_frames)
-    times = jnp.arange(n_frames + 1) * (save_every * dt)
+    # the frames at multiples of save_every, then one frame after the remaining steps
+    blocks = ((save_every, n_frames), (rest, 1)) if rest else ((save_every, n_frames),)
+    blocks = tuple((every, k) for every, k in blocks if k)
+    states = run(state, neighbors, dt, params, model, blocks=blocks)
+    steps = np.concatenate([[0]] + [every * np.arange(1, k + 1) for every, k in blocks])
+    steps[1 + n_frames :] += n_frames * save_every
+    times = jnp.asarray(steps, dt.dtype) * dt
     return Trajectory(states=states, times=times)
 
 
@@ -364,25 +371,28 @@ def _initial_carry(state, neighbors):
     return state, neighbors, -jnp.ones(2, jnp.int32), jnp.zeros((), jnp.int32)
 
 
-def _simulate_traced(
-    state, neighbors, dt, params, model, *, save_every, n_frames, checkpoint_every
-):
-    """One ``lax.scan`` (under grad/jit/vmap); overflow and instability are raised from
-    inside the computation.  Returns the frames, the initial one first."""
+def _simulate_traced(state, neighbors, dt, params, model, *, blocks, checkpoint_every):
+    """One ``lax.scan`` per block of ``(save_every, n_frames)`` (under grad/jit/vmap);
+    overflow and instability are raised from inside the computation.  Returns the frames,
+    the initial one first."""
     neighbors = _update_neighbors(state.position, neighbors, model, rebuild=True)
     state = evaluate(state, neighbors, model, params)
-    carry, frames = _run_frames(
-        _initial_carry(state, neighbors),
-        dt,
-        params,
-        model=model,
-        save_every=save_every,
-        n_frames=n_frames,
-        checkpoint_every=checkpoint_every,
-    )
+    carry = _initial_carry(state, neighbors)
+    all_frames = [_expand(state)]
+    for save_every, n_frames in blocks:
+        carry, frames = _run_frames(
+            carry,
+            dt,
+            params,
+            model=model,
+            save_every=save_every,
+            n_frames=n_frames,
+            checkpoint_every=checkpoint_every,
+        )
+        all_frames.append(frames)
     jax.debug.callback(_raise_overflow, _overflowed(carry[1]))
     jax.debug.callback(_raise_failure, carry[2], dt)
-    return _stack([_expand(state), frames])
+    return _stack(all_frames)
 
 
 def _simulate_in_chunks(
@@ -392,8 +402,7 @@ def _simulate_in_chunks(
     params,
     model,
     *,
-    save_every,
-    n_frames,
+    blocks,
     on_frames,
     progress,
     steps_per_chunk,
@@ -415,10 +424,25 @@ def _simulate_in_chunks(
     all_frames = [_expand(state)]
     if on_frames is not None:
         on_frames(all_frames[0], jnp.zeros(1))
-    frames_per_chunk = max(1, steps_per_chunk // save_every)
     carry = _initial_carry(state, neighbors)
-    done = 0
+    done_steps = 0
     extra = 0  # neighbour slots added beyond the allocation's own estimate
+    for save_every, n_frames in blocks:
+        done_steps, carry, extra = _run_block(
+            carry, dt, params, model, save_every, n_frames, done_steps, extra,
+            all_frames, on_frames, progress, steps_per_chunk,
+        )  # fmt: skip
+    return _stack(all_frames)
+
+
+def _run_block(
+    carry, dt, params, model, save_every, n_frames, done_steps, extra,
+    all_frames, on_frames, progress, steps_per_chunk,
+):  # fmt: skip
+    """``n_frames`` frames of ``save_every`` steps in chunks; returns ``(done_steps,
+    carry, extra)``."""
+    frames_per_chunk = max(1, steps_per_chunk // save_every)
+    done = 0
     while done < n_frames:
         k = min(frames_per_chunk, n_frames - done)
         for _attempt in range(10):
@@ -443,17 +467,17 @@ def _simulate_in_chunks(
             warnings.warn(
                 f"neighbour list overflowed near step {int(step)}; re-allocated "
                 f"{old} -> {capacity(neighbors.fluid)} slots and repeated the chunk",
-                stacklevel=3,
+                stacklevel=4,
             )
         else:
             raise NeighborOverflowError(
                 "neighbour list kept overflowing; raise Model.neighbor_capacity"
             )
         carry = new_carry
-        frame_times = (done + 1 + jnp.arange(k)) * (save_every * dt)
+        frame_times = (done_steps + (1 + jnp.arange(k)) * save_every) * dt
         fail_step = int(carry[2][0])
         if fail_step >= 0:
-            good = max(0, (fail_step - 1) // save_every - done)
+            good = max(0, (fail_step - 1 - done_steps) // save_every)
             kept = jax.tree_util.tree_map(operator.itemgetter(slice(good)), frames)
             if on_frames is not None and good:
                 on_frames(kept, frame_times[:good])
@@ -462,9 +486,10 @@ def _simulate_in_chunks(
             on_frames(frames, frame_times)
         all_frames.append(frames)
         done += k
+        done_steps += k * save_every
         if progress is not None:
             progress(k * save_every)
-    return _stack(all_frames)
+    return done_steps, carry, extra
 
 
 def _check_finite(state: State) -> None:

@@ -24,7 +24,6 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
-import os
 import warnings
 from pathlib import Path
 from typing import Any
@@ -34,53 +33,17 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from sphjax._paths import check_writable
 from sphjax.case import Case
 from sphjax.integrate import Trajectory
 from sphjax.kernels import KERNELS
 from sphjax.state import Params, State
+from sphjax.xdmf import write_xdmf, xdmf_path
 
 FORMAT = "sphjax-trajectory"
 FORMAT_VERSION = 1
 STATE_FIELDS = tuple(f.name for f in dataclasses.fields(State))
 PARAMS_FIELDS = tuple(f.name for f in dataclasses.fields(Params))
-
-
-# ---------------------------------------------------------------------------- output path
-
-
-def check_writable(path, argument: str = "path") -> Path:
-    """Raise a ValueError naming ``argument`` if a file cannot be written at ``path``.
-
-    Call this before a run starts, so a long simulation never ends in an unwritable path.
-    Returns ``path`` as a :class:`~pathlib.Path`.
-    """
-    if path is None or str(path) == "":
-        raise ValueError(f"{argument}: an output file name is required, e.g. run.h5")
-    path = Path(path)
-    parent = path.parent if str(path.parent) else Path(".")
-    if path.is_dir():
-        raise ValueError(
-            f"{argument}: '{path}' is a directory; give a file name inside it, "
-            f"e.g. '{path / 'run.h5'}'"
-        )
-    if not parent.exists():
-        raise ValueError(
-            f"{argument}: cannot write '{path}': directory '{parent}' does not exist; "
-            f"create it first (mkdir -p '{parent}') or choose another path"
-        )
-    if not parent.is_dir():
-        raise ValueError(f"{argument}: cannot write '{path}': '{parent}' is not a directory")
-    if not os.access(parent, os.W_OK | os.X_OK):
-        raise ValueError(
-            f"{argument}: cannot write '{path}': directory '{parent}' is not writable; "
-            "choose a path in a directory you can write to"
-        )
-    if path.exists() and not os.access(path, os.W_OK):
-        raise ValueError(
-            f"{argument}: cannot overwrite '{path}': the file is read-only; "
-            "remove it, change its permissions or choose another path"
-        )
-    return path
 
 
 # ---------------------------------------------------------------------------- metadata
@@ -144,6 +107,8 @@ class TrajectoryWriter:
       dt: the time step actually used (default ``case.dt``).
       attrs: extra attributes (JSON-able values) to store on the file.
       argument: the name to use for ``path`` in error messages (e.g. ``"--out"``).
+      xdmf: also write an XDMF description beside the file (``run.h5`` -> ``run.xdmf``,
+        see :mod:`sphjax.xdmf`) after every block of frames, so ParaView opens the run.
     """
 
     def __init__(
@@ -155,8 +120,10 @@ class TrajectoryWriter:
         dt: float | None = None,
         attrs: dict[str, Any] | None = None,
         argument: str = "path",
+        xdmf: bool = True,
     ):
         self.path = check_writable(path, argument)
+        self.xdmf = xdmf_path(self.path) if xdmf else None
         try:
             self._file = h5py.File(self.path, "w")
         except OSError as err:
@@ -185,7 +152,12 @@ class TrajectoryWriter:
                 group.attrs[name] = np.asarray(getattr(params, name))
         for key, value in (attrs or {}).items():
             a[key] = json.dumps(_jsonable(value))
+        self._flush()
+
+    def _flush(self) -> None:
         self._file.flush()
+        if self.xdmf is not None:
+            write_xdmf(self._file, self.xdmf)
 
     # on_frames protocol
     def __call__(self, states: State, times) -> None:
@@ -227,7 +199,7 @@ class TrajectoryWriter:
         self._file["times"][self.n_frames :] = times
         self.n_frames = end
         self._file.attrs["n_frames"] = end
-        self._file.flush()
+        self._flush()
 
     def set_error(self, message: str) -> None:
         """Record why a run stopped (kept in the ``error`` attribute)."""
@@ -271,8 +243,25 @@ def _decode(value):
 
 def read_metadata(path) -> dict[str, Any]:
     """The attributes of a trajectory file as Python values (no frames are read)."""
-    with _open(path) as f:
+    with _open(path) as f, _damaged(path):
         return _metadata(f)
+
+
+class _damaged:
+    """Report an HDF5 error while reading as a ValueError naming the file."""
+
+    def __init__(self, path):
+        self.path = path
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, exc_type, exc, tb):
+        if exc_type is not None and issubclass(exc_type, OSError | KeyError | RuntimeError):
+            raise ValueError(
+                f"'{self.path}' cannot be read, the file is damaged ({exc_type.__name__}: {exc})"
+            ) from None
+        return False
 
 
 def _open(path):
@@ -281,9 +270,10 @@ def _open(path):
         raise FileNotFoundError(f"no trajectory file at '{path}'")
     try:
         f = h5py.File(path, "r")
-    except OSError as err:
+        format_ = _decode(f.attrs.get("format"))
+    except (OSError, KeyError, RuntimeError) as err:
         raise ValueError(f"'{path}' is not a readable HDF5 file: {err}") from None
-    if _decode(f.attrs.get("format")) != FORMAT:
+    if format_ != FORMAT:
         f.close()
         raise ValueError(f"'{path}' is not an sphjax trajectory (no format='{FORMAT}' attribute)")
     return f
@@ -319,7 +309,7 @@ def read_trajectory(path, frames=None) -> tuple[Trajectory, dict[str, Any]]:
       ``case_info`` as dicts, ``params`` as :class:`~sphjax.Params`, ``complete``,
       ``error``, ``n_frames``).
     """
-    with _open(path) as f:
+    with _open(path) as f, _damaged(path):
         meta = _metadata(f)
         if "states" not in f:
             raise ValueError(f"'{path}' holds no frames (the run stopped before the first one)")
@@ -352,4 +342,6 @@ __all__ = [
     "read_metadata",
     "read_trajectory",
     "write_trajectory",
+    "write_xdmf",
+    "xdmf_path",
 ]
