@@ -124,23 +124,22 @@ class FramePlot:
         xy = position[..., :2] * scale
         self.xy = xy if self.dim > 1 else np.stack([xy[..., 0], np.zeros_like(xy[..., 0])], -1)
 
+        # a wide, flat set-up (a plate, a beam) gets its colour bar below the particles
         width = 7.0
         aspect = float((hi[1] - lo[1]) / (hi[0] - lo[0]))
-        height = min(max(width * aspect * 0.85 + 1.2, 2.6), 7.5)
-        self.fig, self.ax = plt.subplots(figsize=(width, height), dpi=120)
+        flat = aspect < 0.4
+        plot_width = width - (0.0 if flat else 1.6)
+        height = min(max(plot_width * aspect + (2.2 if flat else 1.2), 2.4), 7.5)
+        self.fig, self.ax = plt.subplots(figsize=(width, height), dpi=120, layout="constrained")
         ax = self.ax
         ax.set_aspect("equal")
         ax.set_xlim(lo[0] * scale, hi[0] * scale)
         ax.set_ylim(lo[1] * scale, hi[1] * scale)
-        for axis in (ax.xaxis, ax.yaxis):
-            axis.set_major_locator(ticker.MaxNLocator(nbins=6))
+        ax.xaxis.set_major_locator(ticker.MaxNLocator(nbins=6))
+        ax.yaxis.set_major_locator(ticker.MaxNLocator(nbins=int(np.clip(round(8 * aspect), 3, 6))))
         ax.set_xlabel(f"x [{length_unit}]")
         ax.set_ylabel(f"y [{length_unit}]")
-        # marker area in points² from the particle spacing on screen
-        self.fig.canvas.draw()
-        bbox = ax.get_window_extent()
-        points_per_unit = bbox.width * 72.0 / self.fig.dpi / ((hi[0] - lo[0]) * scale)
-        size = float(np.clip((0.9 * spacing * scale * points_per_unit) ** 2, 0.2, 80.0))
+        size = 1.0  # set from the spacing on screen once the layout is known
 
         if disc is not None:
             ax.add_patch(
@@ -196,12 +195,22 @@ class FramePlot:
                 *self.xy[0][mobile].T, s=size, c=self.values[0][mobile], cmap="viridis",
                 vmin=vmin, vmax=vmax, linewidths=0,
             )  # fmt: skip
-            bar = self.fig.colorbar(self.points, ax=ax, label=label, shrink=0.9)
+            bar = self.fig.colorbar(
+                self.points, ax=ax, label=label, shrink=0.9 if not flat else 0.6,
+                orientation="horizontal" if flat else "vertical", aspect=30 if flat else 20,
+            )  # fmt: skip
             bar.formatter = ticker.ScalarFormatter(useOffset=False)
             bar.update_ticks()
         self.title = ax.set_title("")
         self.set_frame(0)
-        self.fig.tight_layout()
+        # marker area in points² from the particle spacing on screen
+        self.fig.canvas.draw()
+        bbox = ax.get_window_extent()
+        points_per_unit = bbox.width * 72.0 / self.fig.dpi / ((hi[0] - lo[0]) * scale)
+        size = float(np.clip((0.9 * spacing * scale * points_per_unit) ** 2, 0.2, 80.0))
+        for collection in (self.points, getattr(self, "walls", None)):
+            if collection is not None:
+                collection.set_sizes([size])
 
     def set_frame(self, i: int) -> None:
         """Draw frame ``i`` of the trajectory."""
@@ -222,7 +231,7 @@ class FramePlot:
         )
 
     def save(self, path) -> Path:
-        self.fig.savefig(path)
+        self.fig.savefig(path, bbox_inches="tight", pad_inches=0.1)
         return Path(path)
 
     def close(self) -> None:
