@@ -58,8 +58,9 @@ def _attribute_type(shape: tuple[int, ...]) -> str:
     return {2: "Scalar", 3: "Vector"}.get(len(shape), "Matrix")
 
 
-def describe(f: h5py.File, h5_name: str) -> str:
-    """The XDMF text for the open trajectory file ``f``, referring to it as ``h5_name``."""
+def describe(f: h5py.File, h5_name: str) -> str | None:
+    """The XDMF text for the open trajectory file ``f``, referring to it as ``h5_name``;
+    None while the file holds no frames (an empty time series is not valid XDMF)."""
     states = f["states"] if "states" in f else {}
     times = np.asarray(f["times"][()]) if "times" in f else np.zeros(0)
     fields = {
@@ -94,6 +95,8 @@ def describe(f: h5py.File, h5_name: str) -> str:
                 )
             parts.append("</Grid>")
             grids.append("\n    ".join(parts))
+    if not grids:
+        return None
     body = "\n   ".join(grids)
     return (
         '<?xml version="1.0" ?>\n'
@@ -110,6 +113,9 @@ def describe(f: h5py.File, h5_name: str) -> str:
 def write_xdmf(h5, path=None) -> Path:
     """Write the XDMF description of a trajectory file; returns its path.
 
+    While the file holds no frames there is nothing to describe, and a stale description
+    at ``path`` is removed.
+
     Args:
       h5: the trajectory file (a path, or an open ``h5py.File``).
       path: where to write (default: beside the HDF5 file, ``.xdmf`` instead of ``.h5``).
@@ -122,6 +128,9 @@ def write_xdmf(h5, path=None) -> Path:
     else:
         with h5py.File(h5, "r") as f:
             return write_xdmf(f, path)
+    if text is None:
+        path.unlink(missing_ok=True)
+        return path
     tmp = path.with_name(f".{path.name}.tmp")
     tmp.write_text(text)
     os.replace(tmp, path)  # a reader never sees half a file
