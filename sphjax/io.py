@@ -12,7 +12,8 @@ Every dataset has an unlimited, chunked leading time axis (one chunk per frame).
 :class:`TrajectoryWriter` is an ``on_frames`` callback for :func:`sphjax.simulate`: it
 appends each block of frames and flushes the file, so a run that is killed or goes
 unstable keeps every frame already written.  ``complete`` becomes true only when the
-writer is closed after a run that raised nothing.
+writer is closed after a run that raised nothing.  Beside the file it keeps an XDMF
+description (``run.h5`` -> ``run.xdmf``, :mod:`sphjax.xdmf`) that ParaView opens.
 
     with sphjax.io.TrajectoryWriter("run.h5", case) as writer:
         sphjax.simulate(case, t_end=0.1, save_every=10, on_frames=writer)
