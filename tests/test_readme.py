@@ -43,3 +43,17 @@ def test_every_readme_command_runs(tmp_path, monkeypatch):
         quiet = ["--quiet"] if argv[0] in ("run", "animate") else []
         assert main([*argv, *quiet]) == 0, argv
     assert (tmp_path / "dam.xdmf").is_file() and (tmp_path / "dam_vtk" / "dam.pvd").is_file()
+
+
+OUTSIDE = ("VALIDATION.md", "DESIGN.md", "../shared", "shared/reference")
+
+
+def test_user_docs_cite_no_file_outside_the_repository(capsys):
+    root = README.parent
+    pages = [README, *sorted((root / "docs").rglob("*.md"))]
+    for page in pages:
+        text = page.read_text()
+        assert not [name for name in OUTSIDE if name in text], page
+    assert main(["cases"]) == 0
+    listing = capsys.readouterr().out
+    assert not [name for name in OUTSIDE if name in listing]
