@@ -6,6 +6,7 @@ Imported by :mod:`sphjax.cli` only when a command needs the solver (this imports
 from __future__ import annotations
 
 import dataclasses
+import difflib
 import inspect
 import math
 import sys
@@ -48,7 +49,7 @@ def _check_case_value(name: str, key: str, value, default):
 def build_case(name: str, case_args: dict, *, n=None, dx=None, t_end=None):
     """The case ``name`` with ``--case-arg`` values and ``--n``/``--dx``/``--t-end``."""
     if name not in cases.CASES:
-        close = [c for c in cases.CASES if c.startswith(name[:3])]
+        close = difflib.get_close_matches(name, cases.CASES, n=1)
         hint = f" (did you mean {close[0]!r}?)" if close else ""
         raise UsageError(
             "CASE", f"unknown case {name!r}{hint}; available cases: {', '.join(cases.CASES)}"

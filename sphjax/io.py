@@ -25,6 +25,7 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
+import time
 import warnings
 from pathlib import Path
 from typing import Any
@@ -109,7 +110,9 @@ class TrajectoryWriter:
       attrs: extra attributes (JSON-able values) to store on the file.
       argument: the name to use for ``path`` in error messages (e.g. ``"--out"``).
       xdmf: also write an XDMF description beside the file (``run.h5`` -> ``run.xdmf``,
-        see :mod:`sphjax.xdmf`) after every block of frames, so ParaView opens the run.
+        see :mod:`sphjax.xdmf`), so ParaView opens the run: after a block of frames (at
+        most ~5 % of the run's time goes to it; long series are rewritten less often)
+        and when the writer is closed.
     """
 
     def __init__(
@@ -125,6 +128,7 @@ class TrajectoryWriter:
     ):
         self.path = check_writable(path, argument)
         self.xdmf = xdmf_path(self.path) if xdmf else None
+        self._xdmf_next = 0.0
         try:
             self._file = h5py.File(self.path, "w")
         except OSError as err:
@@ -155,10 +159,17 @@ class TrajectoryWriter:
             a[key] = json.dumps(_jsonable(value))
         self._flush()
 
-    def _flush(self) -> None:
+    # The XDMF text grows with the frames, so it is rewritten only when at least this many
+    # times the duration of its last rewrite has passed (at most ~5 % of a run's time).
+    XDMF_PACE = 20.0
+
+    def _flush(self, xdmf: bool = False) -> None:
         self._file.flush()
-        if self.xdmf is not None:
+        now = time.perf_counter()
+        if self.xdmf is not None and (xdmf or now >= self._xdmf_next):
             write_xdmf(self._file, self.xdmf)
+            done = time.perf_counter()
+            self._xdmf_next = done + self.XDMF_PACE * (done - now)
 
     # on_frames protocol
     def __call__(self, states: State, times) -> None:
@@ -212,6 +223,7 @@ class TrajectoryWriter:
         if self._file is None:
             return
         self._file.attrs["complete"] = bool(complete and not self._file.attrs["error"])
+        self._flush(xdmf=True)
         self._file.close()
         self._file = None
 
