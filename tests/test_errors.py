@@ -90,8 +90,8 @@ def test_bad_step_counts(tg):
         sphjax.simulate(tg, t_end=-1.0)
     with pytest.raises(ValueError, match="n_steps must be a positive integer"):
         sphjax.simulate(tg, n_steps=0)
-    with pytest.raises(ValueError, match="save_every=3 must be a positive divisor of n_steps=4"):
-        sphjax.simulate(tg, n_steps=4, save_every=3)
+    with pytest.raises(ValueError, match="save_every must be a positive integer"):
+        sphjax.simulate(tg, n_steps=4, save_every=0)
 
 
 @pytest.mark.parametrize("shift", [1.0, -0.3])
