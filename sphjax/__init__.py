@@ -15,7 +15,6 @@ apply_default_flags()  # before any JAX backend exists; see sphjax/_xla.py
 
 # The public names are imported on first use (PEP 562), so ``import sphjax`` and the
 # ``sphjax`` command's --help do not pay for importing JAX.
-_SUBMODULES = ("cases", "io", "kernels")
 _NAMES = {
     "KickDriftKick": "sphjax._solver",
     "CalibrationResult": "sphjax.calibrate",
@@ -45,12 +44,17 @@ _NAMES = {
 def __getattr__(name):
     import importlib
 
-    if name in _SUBMODULES:
-        return importlib.import_module(f"sphjax.{name}")
+    if name.startswith("__"):
+        raise AttributeError(f"module 'sphjax' has no attribute {name!r}")
     if name in _NAMES:
         value = getattr(importlib.import_module(_NAMES[name]), name)
         globals()[name] = value
         return value
+    try:  # a submodule, e.g. sphjax.cases or sphjax.integrate
+        return importlib.import_module(f"sphjax.{name}")
+    except ModuleNotFoundError as err:
+        if err.name != f"sphjax.{name}":
+            raise
     raise AttributeError(f"module 'sphjax' has no attribute {name!r}")
 
 
