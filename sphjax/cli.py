@@ -520,6 +520,13 @@ def cmd_dataset(args) -> int:
         raise UsageError(
             "--out", f"'{out}' holds {what} pass --overwrite to replace it, or choose a new folder"
         )
+    if args.resume and not args.overwrite and out.is_dir() and any(out.iterdir()):
+        if not (out / "INCOMPLETE").exists():
+            raise UsageError(
+                "--resume",
+                f"'{out}' holds no interrupted dataset to continue; pass --overwrite to "
+                "replace what it holds, or choose a new folder",
+            )
     if not out.parent.is_dir() or not os.access(out.parent, os.W_OK):
         raise UsageError("--out", f"cannot create '{out}': '{out.parent}' is not a writable folder")
     if args.steps % args.write_every or args.steps < 2 * args.write_every:

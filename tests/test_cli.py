@@ -315,6 +315,11 @@ BAD_INPUT = [
         None,
     ),  # fmt: skip
     (["dataset", "nope", "--out", "d", "--steps", "8"], "CASE: unknown case 'nope'", None),
+    (
+        ["dataset", "taylor_green", "--out", "data", "--steps", "8", "--resume"],
+        "--resume: 'data' holds no interrupted dataset to continue",
+        _folder_with_a_file,
+    ),  # fmt: skip
 ]
 
 
