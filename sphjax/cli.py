@@ -168,7 +168,13 @@ def _parser() -> argparse.ArgumentParser:
     _add_plot(sub)
     _add_animate(sub)
     _add_export(sub)
-    sub.add_parser("cases", help="list the available cases", description="List the cases.")
+    cases = sub.add_parser(
+        "cases",
+        help="list the available cases, or show one case's arguments and parameters",
+        description="List the cases; with a name, show its --case-arg arguments and its "
+        "--set parameters with their default values.",
+    )
+    cases.add_argument("name", metavar="CASE", nargs="?", help="a case to describe")
     _add_dataset(sub)
     return parser
 
@@ -407,9 +413,28 @@ def _summary(factory) -> str:
 def cmd_cases(args) -> int:
     from sphjax.cases import CASES
 
-    width = max(len(name) for name in CASES)
-    for name, factory in CASES.items():
-        print(f"{name:<{width}}  {_summary(factory)}")
+    if args.name is None:
+        width = max(len(name) for name in CASES)
+        for name, factory in CASES.items():
+            print(f"{name:<{width}}  {_summary(factory)}")
+        return EXIT_OK
+    import inspect
+
+    import numpy as np
+
+    from sphjax._cli_run import PARAMS_FIELDS, build_case
+
+    case = build_case(args.name, {})
+    factory = CASES[args.name]
+    print(f"{args.name}: {_summary(factory)}")
+    print("case arguments (--case-arg KEY=VALUE):")
+    for key, parameter in inspect.signature(factory).parameters.items():
+        print(f"  {key} = {parameter.default!r}")
+    print("parameters (--set FIELD=VALUE), as the case sets them:")
+    for name in PARAMS_FIELDS:
+        value = np.asarray(getattr(case.params, name))
+        shown = ",".join(f"{v:g}" for v in value.ravel()) if value.ndim else f"{float(value):g}"
+        print(f"  {name} = {shown}")
     return EXIT_OK
 
 

@@ -46,6 +46,13 @@ def test_cases_lists_every_case(capsys):
     assert all(len(line.split(maxsplit=1)) == 2 for line in lines)  # a description each
 
 
+def test_cases_describes_one_case(capsys):
+    assert main(["cases", "dam_break"]) == 0
+    out = capsys.readouterr().out
+    assert "column_width = 0.3" in out and "wall_slip = 'no_slip'" in out  # --case-arg
+    assert "gravity = 0,-9.81" in out and "reference_density = 1000" in out  # --set
+
+
 def test_run_writes_frames_and_prints_a_summary(tiny_run, capsys):
     code, out = tiny_run
     assert code == 0
