@@ -496,7 +496,10 @@ def cmd_animate(args) -> int:
     meta = _trajectory_metadata(args.file)
     trajectory, _ = _read_frames(args.file, frames=slice(None, None, args.every))
     try:
-        n = animate(trajectory, meta, args.field, out, fps=args.fps, progress=not args.quiet)
+        n = animate(
+            trajectory, meta, args.field, out, fps=args.fps, progress=not args.quiet,
+            frame_numbers=range(0, meta["n_frames"], args.every),
+        )  # fmt: skip
     except ValueError as err:
         raise UsageError("--field", str(err)) from None
     except OSError as err:

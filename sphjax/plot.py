@@ -82,11 +82,15 @@ class FramePlot:
       meta: the metadata of its file (case name and ``case_info`` are used).
       field: a State field; vectors are drawn by their magnitude, ``kind`` by type.
       frame_offset: the index of ``trajectory``'s first frame in its file (for the title).
+      frame_numbers: the index in its file of each frame of ``trajectory`` (for the title;
+        default ``frame_offset + i``), e.g. ``range(0, n, 4)`` for every fourth frame.
     Raises:
       ValueError: ``field`` is not a State field (the message lists them).
     """
 
-    def __init__(self, trajectory, meta: dict, field: str, frame_offset: int = 0):
+    def __init__(
+        self, trajectory, meta: dict, field: str, frame_offset: int = 0, frame_numbers=None
+    ):
         import matplotlib
 
         matplotlib.use("Agg")
@@ -97,7 +101,10 @@ class FramePlot:
         fields = [f for f in vars(states) if f != "time"]
         if field not in fields:
             raise ValueError(f"unknown field {field!r}; choose one of {', '.join(fields)}")
-        self.meta, self.field, self.frame_offset = meta, field, frame_offset
+        self.meta, self.field = meta, field
+        if frame_numbers is None:
+            frame_numbers = range(frame_offset, frame_offset + len(trajectory))
+        self.frame_numbers = list(frame_numbers)
         self.n_frames_in_file = int(meta.get("n_frames", len(trajectory)))
         self.times = np.asarray(trajectory.times, dtype=float)
         position = np.asarray(states.position, dtype=float)
@@ -226,7 +233,7 @@ class FramePlot:
         name = self.meta.get("case", "?")
         projection = "  (x-y projection)" if self.dim == 3 else ""
         self.title.set_text(
-            f"{name}   t = {self.times[i]:.4g} s   frame {self.frame_offset + i}/{n - 1}"
+            f"{name}   t = {self.times[i]:.4g} s   frame {self.frame_numbers[i]}/{n - 1}"
             f"{projection}"
         )
 
@@ -240,11 +247,14 @@ class FramePlot:
         plt.close(self.fig)
 
 
-def animate(trajectory, meta: dict, field: str, path, *, fps: int = 20, progress=True) -> int:
+def animate(
+    trajectory, meta: dict, field: str, path, *, fps: int = 20, progress=True, frame_numbers=None
+) -> int:
     """Write every frame of ``trajectory`` coloured by ``field`` to a GIF or an MP4.
 
     GIFs are written with Pillow; MP4s (H.264) with the ffmpeg binary of the
-    ``imageio-ffmpeg`` package.  Returns the number of frames written.
+    ``imageio-ffmpeg`` package.  ``frame_numbers``: see :class:`FramePlot`.  Returns the
+    number of frames written.
     """
     from matplotlib import animation
     from tqdm import tqdm
@@ -253,7 +263,7 @@ def animate(trajectory, meta: dict, field: str, path, *, fps: int = 20, progress
     suffix = path.suffix.lower()
     if suffix not in MOVIE_SUFFIXES:
         raise ValueError(f"unknown movie extension {suffix!r}; use .gif or .mp4")
-    plot = FramePlot(trajectory, meta, field)
+    plot = FramePlot(trajectory, meta, field, frame_numbers=frame_numbers)
     n = len(trajectory)
     if suffix == ".gif":
         writer = animation.PillowWriter(fps=fps)

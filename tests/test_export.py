@@ -149,3 +149,15 @@ def test_read_back_matches_after_export(run):
     read, meta = read_trajectory(path)
     assert meta["complete"]
     np.testing.assert_array_equal(read.states.position, trajectory.states.position)
+
+
+def test_frame_titles_name_the_frames_of_the_file(run):
+    """An animation of every second frame titles frame 1 of the movie as frame 2 of 4."""
+    from sphjax.plot import FramePlot
+
+    path, _ = run
+    every2, meta = read_trajectory(path, frames=slice(None, None, 2))
+    plot = FramePlot(every2, meta, "kind", frame_numbers=range(0, meta["n_frames"], 2))
+    plot.set_frame(1)
+    assert "frame 2/3" in plot.title.get_text() and plot.title.get_text().startswith("taylor_green")
+    plot.close()
