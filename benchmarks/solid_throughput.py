@@ -20,7 +20,7 @@ import jax
 import numpy as np
 
 import sphjax
-from sphjax.integrate import build_neighbors, kick_drift_kick
+from sphjax.integration.simulate import build_neighbors, kick_drift_kick
 
 
 def main(argv=None):

@@ -10,8 +10,8 @@ Weakly compressible fluids and total-Lagrangian elastic solids as pure functions
 Layers, each importing only those below it: ``sphjax.core`` (State, Params, Model,
 kernels, space, neighbour search), ``sphjax.physics`` (systems, per-pair terms,
 interactions, the right-hand side), ``sphjax.integration`` (the kick-drift-kick step, the
-``lax.scan`` driver, diffrax), ``sphjax.cases`` and ``sphjax.observables``, ``sphjax.io``,
-and the applications (command line, calibration, datasets, surrogates).
+``lax.scan`` driver, diffrax), ``sphjax.cases``, ``sphjax.io``, and the applications
+(command line, calibration, datasets, surrogates).  See docs/architecture.md.
 """
 
 # ruff: noqa: E402  (XLA flags must be set before the other imports)
@@ -19,50 +19,98 @@ from sphjax._xla import apply_default_flags
 
 apply_default_flags()  # before any JAX backend exists; see sphjax/_xla.py
 
-from sphjax import cases, io
-from sphjax.calibrate import CalibrationResult, calibrate
-from sphjax.core import kernels
-from sphjax.core.case import Case
-from sphjax.core.model import Domain, Model
-from sphjax.core.params import FluidParams, Params, SolidParams, make_params
-from sphjax.core.state import Kind, State, Trajectory, make_state
-from sphjax.integration._kdk import KickDriftKick
-from sphjax.integration.diffrax import diffeqsolve_case
-from sphjax.integration.simulate import (
-    NeighborOverflowError,
-    SimulationError,
-    kick_drift_kick,
-    simulate,
-)
-from sphjax.integration.timestep import stable_time_step
-from sphjax.io import TrajectoryWriter, read_trajectory
-from sphjax.physics.boundary.system import WallSystem
-from sphjax.physics.boundary.wall import AdamiBoundary
-from sphjax.physics.fluid.density import ContinuityDensity, SummationDensity
-from sphjax.physics.fluid.density_diffusion import MolteniColagrossi
-from sphjax.physics.fluid.eos import LinearEOS, TaitEOS
-from sphjax.physics.fluid.momentum import TransportVelocity
-from sphjax.physics.fluid.system import FluidSystem
-from sphjax.physics.fluid.viscosity import ArtificialViscosity, MorrisViscosity
-from sphjax.physics.rhs import Neighbors, build_neighbors, evaluate
-from sphjax.physics.solid.material import StVenantKirchhoff
-from sphjax.physics.solid.penalty import PenaltyForce
-from sphjax.physics.solid.system import SolidSystem
+# The public names are imported on first use (PEP 562), so ``import sphjax`` and the
+# ``sphjax`` command's --help do not pay for importing JAX.
+_NAMES = {
+    "CalibrationResult": "sphjax.calibrate",
+    "calibrate": "sphjax.calibrate",
+    "Case": "sphjax.core.case",
+    "Domain": "sphjax.core.model",
+    "Model": "sphjax.core.model",
+    "FluidParams": "sphjax.core.params",
+    "Params": "sphjax.core.params",
+    "SolidParams": "sphjax.core.params",
+    "make_params": "sphjax.core.params",
+    "Kind": "sphjax.core.state",
+    "State": "sphjax.core.state",
+    "Trajectory": "sphjax.core.state",
+    "make_state": "sphjax.core.state",
+    "KickDriftKick": "sphjax.integration._kdk",
+    "diffeqsolve_case": "sphjax.integration.diffrax",
+    "NeighborOverflowError": "sphjax.integration.simulate",
+    "SimulationError": "sphjax.integration.simulate",
+    "kick_drift_kick": "sphjax.integration.simulate",
+    "simulate": "sphjax.integration.simulate",
+    "stable_time_step": "sphjax.integration.timestep",
+    "TrajectoryWriter": "sphjax.io",
+    "read_trajectory": "sphjax.io",
+    "WallSystem": "sphjax.physics.boundary.system",
+    "AdamiBoundary": "sphjax.physics.boundary.wall",
+    "ContinuityDensity": "sphjax.physics.fluid.density",
+    "SummationDensity": "sphjax.physics.fluid.density",
+    "MolteniColagrossi": "sphjax.physics.fluid.density_diffusion",
+    "LinearEOS": "sphjax.physics.fluid.eos",
+    "TaitEOS": "sphjax.physics.fluid.eos",
+    "TransportVelocity": "sphjax.physics.fluid.momentum",
+    "FluidSystem": "sphjax.physics.fluid.system",
+    "ArtificialViscosity": "sphjax.physics.fluid.viscosity",
+    "MorrisViscosity": "sphjax.physics.fluid.viscosity",
+    "Neighbors": "sphjax.physics.rhs",
+    "build_neighbors": "sphjax.physics.rhs",
+    "evaluate": "sphjax.physics.rhs",
+    "StVenantKirchhoff": "sphjax.physics.solid.material",
+    "PenaltyForce": "sphjax.physics.solid.penalty",
+    "SolidSystem": "sphjax.physics.solid.system",
+}
+_MODULES = {"kernels": "sphjax.core.kernels"}
+
+
+def __getattr__(name):
+    import importlib
+
+    if name.startswith("__"):
+        raise AttributeError(f"module 'sphjax' has no attribute {name!r}")
+    if name in _NAMES:
+        value = getattr(importlib.import_module(_NAMES[name]), name)
+        globals()[name] = value
+        return value
+    try:  # a submodule, e.g. sphjax.cases or sphjax.io
+        return importlib.import_module(_MODULES.get(name, f"sphjax.{name}"))
+    except ModuleNotFoundError as err:
+        if err.name != _MODULES.get(name, f"sphjax.{name}"):
+            raise
+    raise AttributeError(f"module 'sphjax' has no attribute {name!r}")
+
+
+def __dir__():
+    return sorted(set(globals()) | set(__all__))
+
 
 __version__ = "0.2.0"
 
 __all__ = [
+    "__version__",
     "AdamiBoundary",
     "ArtificialViscosity",
+    "build_neighbors",
+    "calibrate",
     "CalibrationResult",
     "Case",
+    "cases",
     "ContinuityDensity",
+    "diffeqsolve_case",
     "Domain",
+    "evaluate",
     "FluidParams",
     "FluidSystem",
+    "io",
+    "kernels",
+    "kick_drift_kick",
     "KickDriftKick",
     "Kind",
     "LinearEOS",
+    "make_params",
+    "make_state",
     "Model",
     "MolteniColagrossi",
     "MorrisViscosity",
@@ -70,9 +118,12 @@ __all__ = [
     "Neighbors",
     "Params",
     "PenaltyForce",
+    "read_trajectory",
+    "simulate",
     "SimulationError",
     "SolidParams",
     "SolidSystem",
+    "stable_time_step",
     "State",
     "StVenantKirchhoff",
     "SummationDensity",
@@ -81,18 +132,4 @@ __all__ = [
     "TrajectoryWriter",
     "TransportVelocity",
     "WallSystem",
-    "__version__",
-    "build_neighbors",
-    "calibrate",
-    "cases",
-    "diffeqsolve_case",
-    "evaluate",
-    "io",
-    "kernels",
-    "kick_drift_kick",
-    "make_params",
-    "make_state",
-    "read_trajectory",
-    "simulate",
-    "stable_time_step",
 ]

@@ -1,24 +1,32 @@
-"""The ``sphjax`` command line: run a case to HDF5, plot a frame, list the cases.
+"""The ``sphjax`` command line.
 
     sphjax cases
     sphjax run taylor_green --n 20 --t-end 0.05 --out tg.h5
     sphjax plot tg.h5 --field velocity --out tg.png
+    sphjax animate tg.h5 --field velocity --out tg.gif
+    sphjax export tg.h5 --vtk tg_vtk
+    sphjax dataset taylor_green --out data --steps 40 --write-every 4
 
 Exit codes: 0 success; 1 the simulation went unstable (the frames written before the
-failure stay in the output file); 2 bad input (the message names the argument).
+failure stay in the output file); 2 bad input: one line naming the argument and the fix.
+
+This module imports only the standard library at the top: JAX and the solver are imported
+by the commands that run something, so ``--help``, ``--version`` and a mistyped command
+answer at once.
 """
 
 from __future__ import annotations
 
 import argparse
-import contextlib
+import ast
+import difflib
 import math
+import os
 import sys
-import time
 from pathlib import Path
 
 EXIT_OK, EXIT_UNSTABLE, EXIT_USAGE = 0, 1, 2
-DEFAULT_MAX_FRAMES = 100
+DEFAULT_FRAMES = 100
 CHUNK_STEPS = 500  # steps per compiled chunk: the progress bar moves once per chunk
 
 
@@ -30,86 +38,362 @@ class UsageError(Exception):
         self.argument = argument
 
 
+class _Parser(argparse.ArgumentParser):
+    """argparse with one-line errors: ``sphjax run: error: argument --dx: ... (see ...)``."""
+
+    def error(self, message):
+        self.exit(EXIT_USAGE, f"{self.prog}: error: {message} (see '{self.prog} --help')\n")
+
+
 # ---------------------------------------------------------------------------- argument types
 
 
-def _positive_float(text: str) -> float:
+def _number(text: str) -> float:
     try:
         value = float(text)
     except ValueError:
         raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
-    if not (value > 0 and math.isfinite(value)):
+    if not math.isfinite(value):
+        raise argparse.ArgumentTypeError(f"must be a finite number, got {text}")
+    return value
+
+
+def _positive_float(text: str) -> float:
+    value = _number(text)
+    if not value > 0:
         raise argparse.ArgumentTypeError(f"must be a positive number, got {text}")
     return value
 
 
-def _positive_int(text: str) -> int:
+def _non_negative_float(text: str) -> float:
+    value = _number(text)
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"must be a number >= 0, got {text}")
+    return value
+
+
+def _whole(text: str) -> int:
     try:
-        value = int(text)
+        return int(text)
     except ValueError:
         raise argparse.ArgumentTypeError(f"expected a whole number, got {text!r}") from None
+
+
+def _positive_int(text: str) -> int:
+    value = _whole(text)
     if value < 1:
         raise argparse.ArgumentTypeError(f"must be a positive whole number, got {text}")
     return value
 
 
+def _non_negative_int(text: str) -> int:
+    value = _whole(text)
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"must be a whole number >= 0, got {text}")
+    return value
+
+
+def _key_value(text: str, example: str) -> tuple[str, str]:
+    key, sep, value = text.partition("=")
+    if not sep or not key.strip() or not value.strip():
+        raise argparse.ArgumentTypeError(f"must look like {example}, got {text!r}")
+    return key.strip(), value.strip()
+
+
+def _set_value(text: str):
+    """``FIELD=VALUE`` of ``--set``: a number, or comma-separated numbers for a vector."""
+    name, value = _key_value(text, "FIELD=VALUE, e.g. kinematic_viscosity=0.02")
+    parts = value.strip("()[] ").split(",")
+    try:
+        numbers = [float(p) for p in parts]
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"{name}={value}: the value must be a number (or comma-separated numbers for a "
+            "vector, e.g. gravity=0,-9.81)"
+        ) from None
+    if not all(math.isfinite(v) for v in numbers):
+        raise argparse.ArgumentTypeError(f"{name}={value}: the value must be finite")
+    return name, numbers[0] if len(parts) == 1 and "," not in value else tuple(numbers)
+
+
+def _case_arg(text: str):
+    """``KEY=VALUE`` of ``--case-arg``: a Python literal (number, string, tuple, bool)."""
+    key, value = _key_value(text, "KEY=VALUE, e.g. young_modulus=5.6e6")
+    try:
+        return key, ast.literal_eval(value)
+    except (ValueError, SyntaxError):
+        return key, value  # a plain string, e.g. kernel=wendland_c2
+
+
+def _range(text: str) -> tuple[float, float]:
+    try:
+        lo, hi = (float(v) for v in text.split(":"))
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"must look like LO:HI, e.g. 0.5:1.5, got {text!r}"
+        ) from None
+    if not (math.isfinite(lo) and math.isfinite(hi) and lo <= hi):
+        raise argparse.ArgumentTypeError(f"needs finite LO <= HI, got {text!r}")
+    return lo, hi
+
+
+def _vary(text: str):
+    name, value = _key_value(text, "NAME=LO:HI, e.g. kinematic_viscosity=0.01:0.02")
+    try:
+        return name, _range(value)
+    except argparse.ArgumentTypeError as err:
+        raise argparse.ArgumentTypeError(f"{name}: {err}") from None
+
+
+# ---------------------------------------------------------------------------- the parser
+
+
+def _version() -> str:
+    from sphjax import __version__
+
+    return __version__
+
+
 def _parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+    parser = _Parser(
         prog="sphjax",
         description=(
-            "Differentiable SPH in JAX: run a case, plot a saved frame, list cases, "
-            "generate a learned-surrogate dataset."
+            "Differentiable SPH in JAX: run a case, plot, animate or export a trajectory, "
+            "list the cases, generate a learned-surrogate dataset."
         ),
     )
+    parser.add_argument("--version", action="version", version=f"sphjax {_version()}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
+    _add_run(sub)
+    _add_plot(sub)
+    _add_animate(sub)
+    _add_export(sub)
+    cases = sub.add_parser(
+        "cases",
+        help="list the available cases, or show one case's arguments and parameters",
+        description="List the cases; with a name, show its --case-arg arguments and its "
+        "--set parameters with their default values.",
+    )
+    cases.add_argument("name", metavar="CASE", nargs="?", help="a case to describe")
+    _add_dataset(sub)
+    return parser
 
+
+def _add_run(sub) -> None:
     run = sub.add_parser(
         "run",
-        help="run a case and write its trajectory to HDF5",
-        description="Run a case; frames are appended to --out as the run goes.",
+        help="run a case and write its trajectory to HDF5 (with an XDMF file for ParaView)",
+        description=(
+            "Run a case; frames are appended to --out as the run goes, and an XDMF file "
+            "beside it (same name, .xdmf) opens the time series in ParaView."
+        ),
     )
     run.add_argument("case", metavar="CASE", help="case name (see `sphjax cases`)")
     res = run.add_mutually_exclusive_group()
     res.add_argument("--n", type=_positive_int, help="particles across the case's length")
     res.add_argument(
-        "--dx", type=_positive_float, help="particle spacing (converted to the nearest n)"
+        "--dx", type=_positive_float, help="particle spacing in m (converted to the nearest n)"
     )
     run.add_argument(
-        "--t-end", type=_positive_float, help="simulated end time (default: the case's)"
+        "--t-end", type=_positive_float, help="simulated end time in s (default: the case's)"
     )
     run.add_argument(
-        "--dt", type=_positive_float, help="time step (default: the case's stable step)"
+        "--dt", type=_positive_float, help="time step in s (default: the case's stable step)"
     )
-    run.add_argument(
+    save = run.add_mutually_exclusive_group()
+    save.add_argument(
         "--save-every",
         type=_positive_int,
-        help=f"steps between saved frames; must divide the number of steps "
-        f"(default: about {DEFAULT_MAX_FRAMES} frames)",
+        metavar="STEPS",
+        help="save a frame every STEPS steps, and the last one at the end time "
+        f"(default: about {DEFAULT_FRAMES} frames)",
+    )
+    save.add_argument(
+        "--save-dt",
+        type=_positive_float,
+        metavar="SECONDS",
+        help="save frames at the multiples of SECONDS (the time step is shortened, if "
+        "needed, so that they fall on whole steps)",
+    )
+    run.add_argument(
+        "--set",
+        type=_set_value,
+        action="append",
+        default=[],
+        metavar="FIELD=VALUE",
+        help="set a physical parameter (a Params field), e.g. --set kinematic_viscosity=0.02 "
+        "or --set gravity=0,-9.81; repeatable",
+    )
+    run.add_argument(
+        "--case-arg",
+        type=_case_arg,
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="keyword argument of the case, e.g. --case-arg young_modulus=5.6e6; repeatable",
     )
     run.add_argument("--out", default="trajectory.h5", help="output HDF5 file")
+    run.add_argument("--overwrite", action="store_true", help="replace an existing --out")
     run.add_argument("--float64", action="store_true", help="run in double precision")
     run.add_argument("--quiet", action="store_true", help="no progress bar")
 
+
+def _add_plot(sub) -> None:
     plot = sub.add_parser(
         "plot",
         help="draw the particles of one saved frame coloured by a field",
-        description="Draw one frame of a trajectory file as a PNG.",
+        description="Draw one frame of a trajectory file as an image (PNG, PDF, SVG, ...).",
     )
     plot.add_argument("file", metavar="FILE.h5", help="trajectory written by `sphjax run`")
-    plot.add_argument("--frame", type=int, default=-1, help="frame index (default: last)")
+    plot.add_argument("--frame", type=_whole, default=-1, help="frame index (default: last)")
     plot.add_argument(
         "--field",
         default="velocity",
-        help="State field to colour by; vector fields are drawn by magnitude",
+        help="State field to colour by; vector fields are drawn by magnitude, `kind` by "
+        "particle type",
     )
     plot.add_argument("--out", required=True, help="output image, e.g. frame.png")
 
-    sub.add_parser("cases", help="list the available cases", description="List the cases.")
 
-    from sphjax.dataset import add_dataset_parser
+def _add_animate(sub) -> None:
+    animate = sub.add_parser(
+        "animate",
+        help="write an animation (GIF or MP4) of a trajectory",
+        description="Animate every saved frame of a trajectory file into a GIF or MP4.",
+    )
+    animate.add_argument("file", metavar="FILE.h5", help="trajectory written by `sphjax run`")
+    animate.add_argument("--field", default="velocity", help="State field to colour by")
+    animate.add_argument("--out", required=True, help="output movie: movie.gif or movie.mp4")
+    animate.add_argument("--fps", type=_positive_int, default=20, help="frames per second")
+    animate.add_argument(
+        "--every", type=_positive_int, default=1, help="use every EVERY-th saved frame"
+    )
+    animate.add_argument("--overwrite", action="store_true", help="replace an existing --out")
+    animate.add_argument("--quiet", action="store_true", help="no progress bar")
 
-    add_dataset_parser(sub)
-    return parser
+
+def _add_export(sub) -> None:
+    export = sub.add_parser(
+        "export",
+        help="export a trajectory to VTK for ParaView (one .vtu per frame and a .pvd)",
+        description=(
+            "Write one VTK unstructured-grid file (.vtu) per frame with every field, and a "
+            ".pvd collection that ParaView opens as a time series."
+        ),
+    )
+    export.add_argument("file", metavar="FILE.h5", help="trajectory written by `sphjax run`")
+    export.add_argument("--vtk", required=True, metavar="DIR", help="output folder")
+    export.add_argument("--overwrite", action="store_true", help="write into a non-empty DIR")
+
+
+def _add_dataset(sub) -> None:
+    p = sub.add_parser(
+        "dataset",
+        help="simulate an ensemble and write a LagrangeBench-format dataset",
+        description=(
+            "Simulate an ensemble of CASE (random initial velocities and --vary'd Params) and "
+            "write metadata.json, train.h5, valid.h5, test.h5 to --out."
+        ),
+    )
+    p.add_argument("case", metavar="CASE", help="case name (see `sphjax cases`)")
+    p.add_argument("--out", required=True, help="dataset folder")
+    p.add_argument("--n-train", type=_positive_int, default=8, help="training trajectories")
+    p.add_argument("--n-valid", type=_non_negative_int, default=2, help="validation trajectories")
+    p.add_argument("--n-test", type=_non_negative_int, default=2, help="test trajectories")
+    p.add_argument("--steps", type=_positive_int, required=True, help="solver steps per run")
+    p.add_argument(
+        "--write-every", type=_positive_int, default=1, help="solver steps between frames"
+    )
+    p.add_argument(
+        "--vary",
+        type=_vary,
+        action="append",
+        default=[],
+        metavar="NAME=LO:HI",
+        help="draw Params field NAME uniformly per trajectory",
+    )
+    p.add_argument("--seed", type=_whole, default=0, help="base random seed")
+    p.add_argument(
+        "--case-arg",
+        type=_case_arg,
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="keyword argument of the case, e.g. n=32",
+    )
+    p.add_argument(
+        "--amplitude",
+        type=_range,
+        default=(0.75, 1.25),
+        metavar="LO:HI",
+        help="range of the scale of the case's velocity field (0 <= LO <= HI)",
+    )
+    p.add_argument(
+        "--fourier",
+        type=_non_negative_float,
+        default=0.2,
+        help="relative size of the random divergence-free velocity field",
+    )
+    p.add_argument("--modes", type=_positive_int, default=2, help="largest wavenumber of it")
+    p.add_argument("--dt", type=_positive_float, default=None, help="solver step (default: stable)")
+    p.add_argument(
+        "--batch-size",
+        type=_positive_int,
+        default=None,
+        help="trajectories per compiled call (default 4 per device)",
+    )
+    p.add_argument("--resume", action="store_true", help="continue an interrupted folder")
+    p.add_argument("--overwrite", action="store_true", help="replace the folder")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+
+
+# ---------------------------------------------------------------------------- shared checks
+
+
+def _output_file(path, argument: str, overwrite: bool, suffixes=None) -> Path:
+    """Check an output file before any work: writable, suffix known, not silently replaced."""
+    from sphjax._paths import check_writable
+
+    try:
+        out = check_writable(path, argument)
+    except ValueError as err:
+        raise UsageError(None, str(err)) from None
+    if suffixes is not None and out.suffix.lower() not in suffixes:
+        raise UsageError(
+            argument,
+            f"'{out}' has an unknown extension {out.suffix or '(none)'!r}; use one of "
+            f"{', '.join(sorted(suffixes))}",
+        )
+    if out.exists() and not overwrite:
+        raise UsageError(
+            argument, f"'{out}' exists; pass --overwrite to replace it, or choose another path"
+        )
+    return out
+
+
+def _trajectory_metadata(path) -> dict:
+    """The metadata of a trajectory file, or a UsageError naming FILE.h5."""
+    from sphjax.io import read_metadata
+
+    try:
+        meta = read_metadata(path)
+    except (FileNotFoundError, ValueError) as err:
+        raise UsageError("FILE.h5", str(err)) from None
+    if meta["n_frames"] == 0:
+        raise UsageError("FILE.h5", f"'{path}' holds no frames (the run stopped before the first)")
+    return meta
+
+
+def _read_frames(path, frames=None):
+    """``read_trajectory`` with damaged files reported as bad input."""
+    from sphjax.io import read_trajectory
+
+    try:
+        return read_trajectory(path, frames=frames)
+    except (FileNotFoundError, ValueError, OSError, KeyError, RuntimeError) as err:
+        raise UsageError(
+            "FILE.h5", f"cannot read the frames of '{path}' (the file is damaged?): {err}"
+        ) from None
 
 
 # ---------------------------------------------------------------------------- cases
@@ -129,259 +413,234 @@ def _summary(factory) -> str:
 def cmd_cases(args) -> int:
     from sphjax.cases import CASES
 
-    width = max(len(name) for name in CASES)
-    for name, factory in CASES.items():
-        print(f"{name:<{width}}  {_summary(factory)}")
+    if args.name is None:
+        width = max(len(name) for name in CASES)
+        for name, factory in CASES.items():
+            print(f"{name:<{width}}  {_summary(factory)}")
+        return EXIT_OK
+    import inspect
+
+    import numpy as np
+
+    from sphjax._cli_run import PARAMS_FIELDS, build_case
+
+    case = build_case(args.name, {})
+    factory = CASES[args.name]
+    print(f"{args.name}: {_summary(factory)}")
+    print("case arguments (--case-arg KEY=VALUE):")
+    for key, parameter in inspect.signature(factory).parameters.items():
+        print(f"  {key} = {parameter.default!r}")
+    print("parameters (--set FIELD=VALUE), as the case sets them:")
+    for name in PARAMS_FIELDS:
+        value = np.asarray(getattr(case.params, name))
+        shown = ",".join(f"{v:g}" for v in value.ravel()) if value.ndim else f"{float(value):g}"
+        print(f"  {name} = {shown}")
     return EXIT_OK
 
 
 # ---------------------------------------------------------------------------- run
 
 
-def _divisors(n: int) -> list[int]:
-    small = [d for d in range(1, math.isqrt(n) + 1) if n % d == 0]
-    return sorted(set(small + [n // d for d in small]))
-
-
-def _default_save_every(n_steps: int) -> int:
-    """The smallest divisor of ``n_steps`` that saves at most DEFAULT_MAX_FRAMES frames."""
-    return next(d for d in _divisors(n_steps) if n_steps // d <= DEFAULT_MAX_FRAMES)
-
-
-def _frames_per_chunk(n_frames: int, save_every: int) -> int:
-    """A divisor of ``n_frames`` so every chunk has the same length (one compilation)."""
-    fitting = [d for d in _divisors(n_frames) if d * save_every <= CHUNK_STEPS]
-    return max(fitting) if fitting else 1
-
-
-def _build_case(args):
-    from sphjax import cases
-
-    if args.case not in cases.CASES:
-        raise UsageError(
-            "CASE", f"unknown case {args.case!r}; available cases: {', '.join(cases.CASES)}"
-        )
-    kwargs = {}
-    if args.n is not None:
-        kwargs["n"] = args.n
-    if args.t_end is not None:
-        kwargs["t_end"] = args.t_end
-    try:
-        if args.dx is not None:
-            return cases.get(args.case, dx=args.dx, **kwargs)
-        return cases.get(args.case, **kwargs)
-    except ValueError as err:
-        argument = "--dx" if args.dx is not None else "--n" if args.n is not None else "CASE"
-        raise UsageError(argument, str(err)) from None
-
-
-def _plan(case, args) -> tuple[float, int, int]:
-    """Time step, number of steps and save interval, checked before anything runs."""
-    from sphjax.integration.timestep import check_time_step
-
-    dt = case.dt if args.dt is None else args.dt
-    if args.dt is not None:
-        try:
-            check_time_step(dt, case.state, case.model, case.params)
-        except ValueError as err:
-            raise UsageError("--dt", str(err)) from None
-    t_end = case.t_end if args.t_end is None else args.t_end
-    n_steps = max(1, int(math.ceil(t_end / dt - 1e-9)))  # the rule of sphjax.simulate
-    save_every = _default_save_every(n_steps) if args.save_every is None else args.save_every
-    if n_steps % save_every:
-        options = [d for d in _divisors(n_steps) if d <= max(save_every * 4, 10)][-6:]
-        raise UsageError(
-            "--save-every",
-            f"{save_every} does not divide the {n_steps} steps of this run "
-            f"(t-end {t_end:g} / dt {dt:.4g}); use a divisor of {n_steps}, "
-            f"e.g. {', '.join(map(str, options))}, or change --t-end",
-        )
-    return dt, n_steps, save_every
-
-
 def cmd_run(args) -> int:
-    from sphjax.io import check_writable
+    from sphjax.xdmf import xdmf_path
 
-    try:
-        out = check_writable(args.out, "--out")  # before any work
-    except ValueError as err:
-        raise UsageError(None, str(err)) from None
+    out = _output_file(args.out, "--out", args.overwrite, {".h5", ".hdf5"})
+    if xdmf_path(out).exists() and not args.overwrite:
+        raise UsageError(
+            "--out", f"'{xdmf_path(out)}' exists; pass --overwrite to replace it with the run's"
+        )
     if args.float64:
         import jax
 
-        precision = jax.enable_x64(True)
-    else:
-        precision = contextlib.nullcontext()
-    with precision:
-        return _run(args, out)
+        with jax.enable_x64(True):
+            return _run(args, out)
+    return _run(args, out)
 
 
 def _run(args, out: Path) -> int:
-    from tqdm import tqdm
+    from sphjax._cli_run import run_case
 
-    from sphjax.integration.simulate import NeighborOverflowError, SimulationError, simulate
-    from sphjax.io import TrajectoryWriter
-
-    case = _build_case(args)
-    dt, n_steps, save_every = _plan(case, args)
-    n_frames = n_steps // save_every
-    chunk = _frames_per_chunk(n_frames, save_every) * save_every
-    dx = case.info.get("dx", float("nan"))
-    print(
-        f"{case.name}: {case.n_particles} particles (dx = {dx:.4g}), "
-        f"{n_steps} steps of dt = {dt:.4g} to t = {n_steps * dt:.4g}, "
-        f"saving every {save_every} steps ({n_frames + 1} frames) to {out}",
-        file=sys.stderr,
-    )
-    attrs = {"command": ["sphjax", *args.argv], "n_steps": n_steps, "save_every": save_every}
-    bar = tqdm(total=n_steps, unit="step", disable=args.quiet, file=sys.stderr)
-    start = time.perf_counter()
-    first_chunk_end = []
-
-    def progress(n):
-        if not first_chunk_end:
-            first_chunk_end.append((time.perf_counter(), n))
-        bar.update(n)
-
-    with TrajectoryWriter(out, case, dt=dt, attrs=attrs, argument="--out") as writer:
-        try:
-            simulate(
-                case, dt=dt, n_steps=n_steps, save_every=save_every, on_frames=writer,
-                progress=progress, steps_per_chunk=chunk,
-            )  # fmt: skip
-        except SimulationError as err:
-            bar.close()
-            writer.set_error(str(err))
-            print(
-                f"sphjax run: error: {err}\nstopped at step {err.step}, particle "
-                f"{err.particle}; the {writer.n_frames} frames before it are in {out}. "
-                "Try a smaller --dt.",
-                file=sys.stderr,
-            )
-            return EXIT_UNSTABLE
-        except NeighborOverflowError as err:
-            bar.close()
-            writer.set_error(str(err))
-            print(
-                f"sphjax run: error: {err}\nthe {writer.n_frames} frames before it are in {out}.",
-                file=sys.stderr,
-            )
-            return EXIT_UNSTABLE
-    bar.close()
-    wall = time.perf_counter() - start
-    rate = case.n_particles * n_steps / wall
-    lines = [
-        f"done: {case.n_particles} particles, {n_steps} steps, {wall:.2f} s wall, "
-        f"{rate:.3g} particle-steps/s",
-    ]
-    if first_chunk_end and first_chunk_end[0][1] < n_steps:
-        t1, n1 = first_chunk_end[0]
-        steady = case.n_particles * (n_steps - n1) / (time.perf_counter() - t1)
-        lines.append(f"      {steady:.3g} particle-steps/s after the first chunk (compilation)")
-    lines.append(f"      {writer.n_frames} frames in {out}")
-    print("\n".join(lines))
-    return EXIT_OK
+    return run_case(args, out)
 
 
-# ---------------------------------------------------------------------------- plot
+# ---------------------------------------------------------------------------- plot, animate
 
 
 def cmd_plot(args) -> int:
-    import numpy as np
+    from sphjax.plot import IMAGE_SUFFIXES, FramePlot
 
-    from sphjax.core.state import Kind
-    from sphjax.io import check_writable, read_metadata, read_trajectory
-
-    try:
-        out = check_writable(args.out, "--out")
-    except ValueError as err:
-        raise UsageError(None, str(err)) from None
-    try:
-        meta = read_metadata(args.file)
-    except (FileNotFoundError, ValueError) as err:
-        raise UsageError("FILE.h5", str(err)) from None
+    out = _output_file(args.out, "--out", True, IMAGE_SUFFIXES)
+    meta = _trajectory_metadata(args.file)
     n = meta["n_frames"]
-    if n == 0:
-        raise UsageError("FILE.h5", f"'{args.file}' holds no frames")
     if not -n <= args.frame < n:
         raise UsageError("--frame", f"{args.frame} is out of range; the file holds {n} frames")
-    trajectory, _ = read_trajectory(args.file, frames=args.frame)
-    state = trajectory.frame(0)
-    fields = [f for f in vars(type(state))["__dataclass_fields__"] if f != "time"]
-    if args.field not in fields:
-        raise UsageError("--field", f"unknown field {args.field!r}; choose one of {fields}")
-    values = np.asarray(getattr(state, args.field), dtype=float)
-    label = args.field
-    if values.ndim == 2:
-        values, label = np.linalg.norm(values, axis=-1), f"|{args.field}|"
-    position = np.asarray(state.position, dtype=float)
-    kind = np.asarray(state.kind)
-
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    model = meta.get("model", {})
-    domain = model.get("domain")
-    fig, ax = plt.subplots(figsize=(6, 5), dpi=120)
-    lo, hi = position.min(axis=0)[:2], position.max(axis=0)[:2]
-    if domain and all(math.isfinite(float(v)) for v in domain["lower"] + domain["upper"]):
-        lo = np.minimum(lo, domain["lower"][:2])
-        hi = np.maximum(hi, domain["upper"][:2])
-    extent = float(max(hi - lo))
-    size = max(0.5, min(40.0, (300.0 / max(extent, 1e-30)) ** 2 * _spacing(meta, extent) ** 2))
-    wall = kind == Kind.WALL if args.field != "kind" else np.zeros_like(kind, bool)
-    if wall.any():
-        ax.scatter(*position[wall, :2].T, s=size, c="0.75", marker="s", linewidths=0)
-    points = ax.scatter(*position[~wall, :2].T, s=size, c=values[~wall], cmap="viridis",
-                        linewidths=0)  # fmt: skip
-    fig.colorbar(points, ax=ax, label=label)
-    ax.set_aspect("equal")
-    ax.set_xlim(lo[0], hi[0])
-    ax.set_ylim(lo[1], hi[1])
-    ax.set_xlabel("x")
-    ax.set_ylabel("y")
-    frame = args.frame % n
-    ax.set_title(f"{meta.get('case', '?')}  frame {frame}/{n - 1}  t = {float(state.time):.4g}")
-    if position.shape[1] == 3:
-        ax.set_title(ax.get_title() + "  (x-y projection)")
-    fig.tight_layout()
+    trajectory, _ = _read_frames(args.file, frames=args.frame)
     try:
-        fig.savefig(out)
+        figure = FramePlot(trajectory, meta, args.field, frame_offset=args.frame % n)
+    except ValueError as err:
+        raise UsageError("--field", str(err)) from None
+    try:
+        figure.save(out)
     except OSError as err:
         raise UsageError("--out", f"cannot write '{out}': {err}") from None
     finally:
-        plt.close(fig)
+        figure.close()
     print(f"wrote {out}", file=sys.stderr)
     return EXIT_OK
 
 
-def _spacing(meta, extent) -> float:
-    dx = meta.get("case_info", {}).get("dx")
-    return float(dx) if dx else extent / 50.0
+def cmd_animate(args) -> int:
+    from sphjax.plot import MOVIE_SUFFIXES, animate
+
+    out = _output_file(args.out, "--out", args.overwrite, MOVIE_SUFFIXES)
+    meta = _trajectory_metadata(args.file)
+    trajectory, _ = _read_frames(args.file, frames=slice(None, None, args.every))
+    try:
+        n = animate(
+            trajectory, meta, args.field, out, fps=args.fps, progress=not args.quiet,
+            frame_numbers=range(0, meta["n_frames"], args.every),
+        )  # fmt: skip
+    except ValueError as err:
+        raise UsageError("--field", str(err)) from None
+    except OSError as err:
+        raise UsageError("--out", f"cannot write '{out}': {err}") from None
+    print(f"wrote {out} ({n} frames)", file=sys.stderr)
+    return EXIT_OK
+
+
+# ---------------------------------------------------------------------------- export
+
+
+def cmd_export(args) -> int:
+    from sphjax.vtk_export import export_vtk
+
+    folder = Path(args.vtk)
+    if folder.exists() and not folder.is_dir():
+        raise UsageError("--vtk", f"'{folder}' is a file; give a folder name")
+    if folder.is_dir() and any(folder.iterdir()) and not args.overwrite:
+        raise UsageError(
+            "--vtk", f"'{folder}' is not empty; pass --overwrite or choose another folder"
+        )
+    if not folder.parent.is_dir():
+        raise UsageError(
+            "--vtk", f"cannot create '{folder}': '{folder.parent}' does not exist (mkdir -p it)"
+        )
+    _trajectory_metadata(args.file)
+    trajectory, meta = _read_frames(args.file)
+    try:
+        pvd = export_vtk(trajectory, meta, folder, name=Path(args.file).stem)
+    except OSError as err:
+        raise UsageError("--vtk", f"cannot write into '{folder}': {err}") from None
+    print(f"wrote {len(trajectory)} frames and {pvd}", file=sys.stderr)
+    return EXIT_OK
+
+
+# ---------------------------------------------------------------------------- dataset
+
+
+def cmd_dataset(args) -> int:
+    out = Path(args.out)
+    if out.exists() and not out.is_dir():
+        raise UsageError("--out", f"'{out}' is a file; give a folder name")
+    if out.is_dir() and any(out.iterdir()) and not (args.overwrite or args.resume):
+        incomplete = (out / "INCOMPLETE").exists()
+        what = "an incomplete dataset; pass --resume to continue it or" if incomplete else "files;"
+        raise UsageError(
+            "--out", f"'{out}' holds {what} pass --overwrite to replace it, or choose a new folder"
+        )
+    if args.resume and not args.overwrite and out.is_dir() and any(out.iterdir()):
+        if not (out / "INCOMPLETE").exists():
+            raise UsageError(
+                "--resume",
+                f"'{out}' holds no interrupted dataset to continue; pass --overwrite to "
+                "replace what it holds, or choose a new folder",
+            )
+    if not out.parent.is_dir() or not os.access(out.parent, os.W_OK):
+        raise UsageError("--out", f"cannot create '{out}': '{out.parent}' is not a writable folder")
+    if args.steps % args.write_every or args.steps < 2 * args.write_every:
+        n = args.steps // args.write_every * args.write_every
+        raise UsageError(
+            "--write-every",
+            f"{args.write_every} must divide --steps {args.steps} and give at least 3 frames "
+            f"(--steps >= 2 x --write-every); e.g. --steps {max(n, 2 * args.write_every)}",
+        )
+    from sphjax._cli_run import build_case
+
+    case = build_case(args.case, dict(args.case_arg))
+    from sphjax.dataset import Perturbation, check_vary, generate_dataset
+
+    try:
+        vary = check_vary(case.params, dict(args.vary))
+    except ValueError as err:
+        raise UsageError("--vary", str(err).removeprefix("vary: ")) from None
+    try:
+        perturbation = Perturbation(tuple(args.amplitude), args.fourier, args.modes)
+    except ValueError as err:
+        raise UsageError("--amplitude", str(err)) from None
+    try:
+        out = generate_dataset(
+            case,
+            out,
+            n_train=args.n_train,
+            n_valid=args.n_valid,
+            n_test=args.n_test,
+            steps=args.steps,
+            write_every=args.write_every,
+            vary=vary,
+            perturbation=perturbation,
+            seed=args.seed,
+            dt=args.dt,
+            batch_size=args.batch_size,
+            resume=args.resume,
+            overwrite=args.overwrite,
+            progress=not args.no_progress,
+            case_kwargs=dict(args.case_arg),
+        )
+    except (ValueError, FileExistsError) as err:
+        argument = "--dt" if args.dt is not None and "dt" in str(err) else "--out"
+        raise UsageError(argument, str(err)) from None
+    except RuntimeError as err:  # a trajectory went unstable
+        print(f"sphjax dataset: error: {err}", file=sys.stderr)
+        return EXIT_UNSTABLE
+    print(f"wrote {out}")
+    return EXIT_OK
 
 
 # ---------------------------------------------------------------------------- main
 
 
-def cmd_dataset(args) -> int:
-    from sphjax.dataset import main_dataset
+COMMANDS = {
+    "run": cmd_run,
+    "plot": cmd_plot,
+    "animate": cmd_animate,
+    "export": cmd_export,
+    "cases": cmd_cases,
+    "dataset": cmd_dataset,
+}
 
-    return main_dataset(args)
 
-
-COMMANDS = {"run": cmd_run, "plot": cmd_plot, "cases": cmd_cases, "dataset": cmd_dataset}
+def _unknown_command(argv: list[str]) -> str | None:
+    """A one-line answer to a mistyped command (argparse lists the choices only)."""
+    first = next((a for a in argv if not a.startswith("-")), None)
+    if first is None or first in COMMANDS or argv[: argv.index(first)]:
+        return None
+    close = difflib.get_close_matches(first, COMMANDS, n=1)
+    hint = f"did you mean '{close[0]}'? " if close else ""
+    return f"sphjax: error: unknown command {first!r}; {hint}choose one of {', '.join(COMMANDS)}"
 
 
 def main(argv: list[str] | None = None) -> int:
     """Entry point of the ``sphjax`` command; returns the exit code."""
-    parser = _parser()
+    argv = list(sys.argv[1:] if argv is None else argv)
+    message = _unknown_command(argv)
+    if message:
+        print(message, file=sys.stderr)
+        return EXIT_USAGE
     try:
-        args = parser.parse_args(argv)
-    except SystemExit as exit_:  # argparse has printed its message (or --help)
+        args = _parser().parse_args(argv)
+    except SystemExit as exit_:  # argparse has printed its message (or --help, --version)
         return exit_.code if isinstance(exit_.code, int) else EXIT_USAGE
-    args.argv = list(sys.argv[1:] if argv is None else argv)
+    args.argv = argv
     try:
         return COMMANDS[args.command](args)
     except UsageError as err:

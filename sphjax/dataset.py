@@ -1,12 +1,13 @@
 """Ensembles of SPH trajectories in the LagrangeBench dataset layout.
 
 A dataset folder holds ``metadata.json`` and ``train.h5``, ``valid.h5``, ``test.h5``
-(VALIDATION.md, "Learned surrogate dataset format").  Each HDF5 file has one group per
-trajectory (``00000``, ``00001``, ...) with ``position`` (float32, ``[T, N, d]``) and
-``particle_type`` (int32, ``[N]``; -1 padding, 0 fluid, 1 wall, 2 moving wall, 3 rigid or
-elastic body).  The statistics ``vel_mean``/``vel_std``/``acc_mean``/``acc_std`` are per
-dimension over the fluid particles of the training split, of per-frame finite differences
-of positions (not divided by time), with the minimum image on periodic axes.
+(the layout of LagrangeBench, Toshev et al. 2023; see ``docs/surrogates.md``).  Each HDF5
+file has one group per trajectory (``00000``, ``00001``, ...) with ``position`` (float32,
+``[T, N, d]``) and ``particle_type`` (int32, ``[N]``; -1 padding, 0 fluid, 1 wall, 2 moving
+wall, 3 rigid or elastic body).  The statistics ``vel_mean``/``vel_std``/``acc_mean``/
+``acc_std`` are per dimension over the fluid particles of the training split, of per-frame
+finite differences of positions (not divided by time), with the minimum image on periodic
+axes.
 
 Each trajectory starts from the case's initial state with a seeded random change
 (:class:`Perturbation`: a scaled velocity field plus a random divergence-free Fourier
@@ -18,13 +19,11 @@ Generation is resumable: finished trajectories go to ``DIR/.partial/`` one file 
 ``INCOMPLETE`` marker holds the plan, and only when every trajectory is done are the HDF5
 files and ``metadata.json`` written and the marker removed.  An interrupted folder is
 never mistaken for a dataset: it has no ``metadata.json``, and :func:`generate_dataset`
-with ``resume=True`` (CLI ``--resume``) continues it.
+with ``resume=True`` (``sphjax dataset --resume``) continues it.
 """
 
 from __future__ import annotations
 
-import argparse
-import ast
 import dataclasses
 import json
 import math
@@ -38,7 +37,6 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from sphjax import cases as cases_module
 from sphjax.core.case import Case
 from sphjax.core.params import Params
 from sphjax.core.space import minimum_image
@@ -482,7 +480,7 @@ def _assemble(out: Path, case: Case, plan: dict, jobs, part_file) -> None:
 
 
 def metadata(case: Case, plan: dict, bounds, periodic, types, stats) -> dict:
-    """The LagrangeBench metadata keys (VALIDATION.md) plus the sphjax settings."""
+    """The LagrangeBench metadata keys plus the sphjax settings."""
     params, model = case.params, case.model
     dx = float(case.info.get("dx", model.smoothing_length))
     frames = plan["steps"] // plan["write_every"] + 1
@@ -532,120 +530,3 @@ def metadata(case: Case, plan: dict, bounds, periodic, types, stats) -> dict:
         format_version=FORMAT_VERSION,
     )
     return meta
-
-
-# ---------------------------------------------------------------------------- CLI
-
-
-def _parse_range(text: str, what: str) -> tuple[float, float]:
-    try:
-        lo, hi = text.split(":")
-        return float(lo), float(hi)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{what} must look like LO:HI, got {text!r}") from None
-
-
-def _parse_vary(text: str):
-    if "=" not in text:
-        raise argparse.ArgumentTypeError(f"--vary must look like NAME=LO:HI, got {text!r}")
-    name, rng = text.split("=", 1)
-    return name.strip(), _parse_range(rng, f"--vary {name}")
-
-
-def _parse_case_arg(text: str):
-    if "=" not in text:
-        raise argparse.ArgumentTypeError(f"--case-arg must look like KEY=VALUE, got {text!r}")
-    key, value = text.split("=", 1)
-    try:
-        value = ast.literal_eval(value)
-    except (ValueError, SyntaxError):
-        pass  # a plain string
-    return key.strip(), value
-
-
-def add_dataset_parser(subparsers) -> argparse.ArgumentParser:
-    """Add the ``dataset`` subcommand to an ``argparse`` subparsers object."""
-    p = subparsers.add_parser(
-        "dataset",
-        help="simulate an ensemble and write a LagrangeBench-format dataset",
-        description=(
-            "Simulate an ensemble of CASE (random initial velocities and --vary'd Params) and "
-            "write metadata.json, train.h5, valid.h5, test.h5 to --out."
-        ),
-    )
-    p.add_argument("case", help=f"case name ({', '.join(sorted(cases_module.CASES))})")
-    p.add_argument("--out", required=True, help="dataset folder")
-    p.add_argument("--n-train", type=int, default=8)
-    p.add_argument("--n-valid", type=int, default=2)
-    p.add_argument("--n-test", type=int, default=2)
-    p.add_argument("--steps", type=int, required=True, help="solver steps per trajectory")
-    p.add_argument("--write-every", type=int, default=1, help="solver steps between frames")
-    p.add_argument(
-        "--vary",
-        type=_parse_vary,
-        action="append",
-        default=[],
-        metavar="NAME=LO:HI",
-        help="draw Params field NAME uniformly per trajectory",
-    )
-    p.add_argument("--seed", type=int, default=0)
-    p.add_argument(
-        "--case-arg",
-        type=_parse_case_arg,
-        action="append",
-        default=[],
-        metavar="KEY=VALUE",
-        help="keyword argument of the case, e.g. n=32",
-    )
-    p.add_argument(
-        "--amplitude",
-        type=lambda s: _parse_range(s, "--amplitude"),
-        default=(0.75, 1.25),
-        metavar="LO:HI",
-        help="range of the scale of the case's velocity field",
-    )
-    p.add_argument(
-        "--fourier",
-        type=float,
-        default=0.2,
-        help="relative size of the random divergence-free velocity field",
-    )
-    p.add_argument("--modes", type=int, default=2, help="largest wavenumber of that field")
-    p.add_argument("--dt", type=float, default=None, help="solver step (default: stable)")
-    p.add_argument(
-        "--batch-size",
-        type=int,
-        default=None,
-        help="trajectories per compiled call (default 4 per device)",
-    )
-    p.add_argument("--resume", action="store_true", help="continue an interrupted folder")
-    p.add_argument("--overwrite", action="store_true", help="replace the folder")
-    p.add_argument("--no-progress", action="store_true", help="no progress bar")
-    p.set_defaults(func=main_dataset)
-    return p
-
-
-def main_dataset(args) -> int:
-    """Run the ``dataset`` subcommand from parsed ``args``."""
-    case_kwargs = dict(args.case_arg)
-    case = cases_module.get(args.case, **case_kwargs)
-    out = generate_dataset(
-        case,
-        args.out,
-        n_train=args.n_train,
-        n_valid=args.n_valid,
-        n_test=args.n_test,
-        steps=args.steps,
-        write_every=args.write_every,
-        vary=dict(args.vary),
-        perturbation=Perturbation(tuple(args.amplitude), args.fourier, args.modes),
-        seed=args.seed,
-        dt=args.dt,
-        batch_size=args.batch_size,
-        resume=args.resume,
-        overwrite=args.overwrite,
-        progress=not args.no_progress,
-        case_kwargs=case_kwargs,
-    )
-    print(f"wrote {out}")
-    return 0

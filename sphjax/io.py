@@ -12,7 +12,8 @@ Every dataset has an unlimited, chunked leading time axis (one chunk per frame).
 :class:`TrajectoryWriter` is an ``on_frames`` callback for :func:`sphjax.simulate`: it
 appends each block of frames and flushes the file, so a run that is killed or goes
 unstable keeps every frame already written.  ``complete`` becomes true only when the
-writer is closed after a run that raised nothing.
+writer is closed after a run that raised nothing.  Beside the file it keeps an XDMF
+description (``run.h5`` -> ``run.xdmf``, :mod:`sphjax.xdmf`) that ParaView opens.
 
     with sphjax.io.TrajectoryWriter("run.h5", case) as writer:
         sphjax.simulate(case, t_end=0.1, save_every=10, on_frames=writer)
@@ -24,7 +25,7 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
-import os
+import time
 import warnings
 from pathlib import Path
 from typing import Any
@@ -34,54 +35,16 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from sphjax._paths import check_writable
 from sphjax.core.case import Case
 from sphjax.core.kernels import KERNELS
-from sphjax.core.params import Params
-from sphjax.core.state import State
-from sphjax.integration.simulate import Trajectory
+from sphjax.core.params import Params, make_params
+from sphjax.core.state import State, Trajectory
+from sphjax.xdmf import write_xdmf, xdmf_path
 
 FORMAT = "sphjax-trajectory"
 FORMAT_VERSION = 1
 STATE_FIELDS = tuple(f.name for f in dataclasses.fields(State))
-PARAMS_FIELDS = tuple(f.name for f in dataclasses.fields(Params))
-
-
-# ---------------------------------------------------------------------------- output path
-
-
-def check_writable(path, argument: str = "path") -> Path:
-    """Raise a ValueError naming ``argument`` if a file cannot be written at ``path``.
-
-    Call this before a run starts, so a long simulation never ends in an unwritable path.
-    Returns ``path`` as a :class:`~pathlib.Path`.
-    """
-    if path is None or str(path) == "":
-        raise ValueError(f"{argument}: an output file name is required, e.g. run.h5")
-    path = Path(path)
-    parent = path.parent if str(path.parent) else Path(".")
-    if path.is_dir():
-        raise ValueError(
-            f"{argument}: '{path}' is a directory; give a file name inside it, "
-            f"e.g. '{path / 'run.h5'}'"
-        )
-    if not parent.exists():
-        raise ValueError(
-            f"{argument}: cannot write '{path}': directory '{parent}' does not exist; "
-            f"create it first (mkdir -p '{parent}') or choose another path"
-        )
-    if not parent.is_dir():
-        raise ValueError(f"{argument}: cannot write '{path}': '{parent}' is not a directory")
-    if not os.access(parent, os.W_OK | os.X_OK):
-        raise ValueError(
-            f"{argument}: cannot write '{path}': directory '{parent}' is not writable; "
-            "choose a path in a directory you can write to"
-        )
-    if path.exists() and not os.access(path, os.W_OK):
-        raise ValueError(
-            f"{argument}: cannot overwrite '{path}': the file is read-only; "
-            "remove it, change its permissions or choose another path"
-        )
-    return path
 
 
 # ---------------------------------------------------------------------------- metadata
@@ -103,7 +66,10 @@ def _jsonable(value):
     if isinstance(value, dict):
         return {str(k): _jsonable(v) for k, v in value.items()}
     if dataclasses.is_dataclass(value) and not isinstance(value, type):
-        return {f.name: _jsonable(getattr(value, f.name)) for f in dataclasses.fields(value)}
+        fields = {f.name: _jsonable(getattr(value, f.name)) for f in dataclasses.fields(value)}
+        return {"type": type(value).__name__, **fields}
+    if callable(value):
+        return getattr(value, "__qualname__", repr(value))
     return repr(value)
 
 
@@ -145,6 +111,10 @@ class TrajectoryWriter:
       dt: the time step actually used (default ``case.dt``).
       attrs: extra attributes (JSON-able values) to store on the file.
       argument: the name to use for ``path`` in error messages (e.g. ``"--out"``).
+      xdmf: also write an XDMF description beside the file (``run.h5`` -> ``run.xdmf``,
+        see :mod:`sphjax.xdmf`), so ParaView opens the run: after a block of frames (at
+        most ~5 % of the run's time goes to it; long series are rewritten less often)
+        and when the writer is closed.
     """
 
     def __init__(
@@ -156,8 +126,11 @@ class TrajectoryWriter:
         dt: float | None = None,
         attrs: dict[str, Any] | None = None,
         argument: str = "path",
+        xdmf: bool = True,
     ):
         self.path = check_writable(path, argument)
+        self.xdmf = xdmf_path(self.path) if xdmf else None
+        self._xdmf_next = 0.0
         try:
             self._file = h5py.File(self.path, "w")
         except OSError as err:
@@ -182,11 +155,23 @@ class TrajectoryWriter:
             a["dt"] = float(dt)
         if params is not None:
             group = self._file.create_group("params")
-            for name in PARAMS_FIELDS:
-                group.attrs[name] = np.asarray(getattr(params, name))
+            for name, value in params.items():
+                group.attrs[name] = np.asarray(value)
         for key, value in (attrs or {}).items():
             a[key] = json.dumps(_jsonable(value))
+        self._flush()
+
+    # The XDMF text grows with the frames, so it is rewritten only when at least this many
+    # times the duration of its last rewrite has passed (at most ~5 % of a run's time).
+    XDMF_PACE = 20.0
+
+    def _flush(self, xdmf: bool = False) -> None:
         self._file.flush()
+        now = time.perf_counter()
+        if self.xdmf is not None and (xdmf or now >= self._xdmf_next):
+            write_xdmf(self._file, self.xdmf)
+            done = time.perf_counter()
+            self._xdmf_next = done + self.XDMF_PACE * (done - now)
 
     # on_frames protocol
     def __call__(self, states: State, times) -> None:
@@ -228,7 +213,7 @@ class TrajectoryWriter:
         self._file["times"][self.n_frames :] = times
         self.n_frames = end
         self._file.attrs["n_frames"] = end
-        self._file.flush()
+        self._flush()
 
     def set_error(self, message: str) -> None:
         """Record why a run stopped (kept in the ``error`` attribute)."""
@@ -240,6 +225,7 @@ class TrajectoryWriter:
         if self._file is None:
             return
         self._file.attrs["complete"] = bool(complete and not self._file.attrs["error"])
+        self._flush(xdmf=True)
         self._file.close()
         self._file = None
 
@@ -272,8 +258,25 @@ def _decode(value):
 
 def read_metadata(path) -> dict[str, Any]:
     """The attributes of a trajectory file as Python values (no frames are read)."""
-    with _open(path) as f:
+    with _open(path) as f, _damaged(path):
         return _metadata(f)
+
+
+class _damaged:
+    """Report an HDF5 error while reading as a ValueError naming the file."""
+
+    def __init__(self, path):
+        self.path = path
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, exc_type, exc, tb):
+        if exc_type is not None and issubclass(exc_type, OSError | KeyError | RuntimeError):
+            raise ValueError(
+                f"'{self.path}' cannot be read, the file is damaged ({exc_type.__name__}: {exc})"
+            ) from None
+        return False
 
 
 def _open(path):
@@ -282,9 +285,10 @@ def _open(path):
         raise FileNotFoundError(f"no trajectory file at '{path}'")
     try:
         f = h5py.File(path, "r")
-    except OSError as err:
+        format_ = _decode(f.attrs.get("format"))
+    except (OSError, KeyError, RuntimeError) as err:
         raise ValueError(f"'{path}' is not a readable HDF5 file: {err}") from None
-    if _decode(f.attrs.get("format")) != FORMAT:
+    if format_ != FORMAT:
         f.close()
         raise ValueError(f"'{path}' is not an sphjax trajectory (no format='{FORMAT}' attribute)")
     return f
@@ -301,9 +305,9 @@ def _metadata(f) -> dict[str, Any]:
     meta["complete"] = bool(meta.get("complete", False))
     meta["n_frames"] = int(f["times"].shape[0]) if "times" in f else 0
     if "params" in f:
-        meta["params"] = Params(
-            **{name: jnp.asarray(f["params"].attrs[name]) for name in PARAMS_FIELDS}
-        )
+        values = {name: np.asarray(value) for name, value in f["params"].attrs.items()}
+        gravity = values.pop("gravity")
+        meta["params"] = make_params(gravity.shape[0], gravity=gravity, **values)
     return meta
 
 
@@ -320,7 +324,7 @@ def read_trajectory(path, frames=None) -> tuple[Trajectory, dict[str, Any]]:
       ``case_info`` as dicts, ``params`` as :class:`~sphjax.Params`, ``complete``,
       ``error``, ``n_frames``).
     """
-    with _open(path) as f:
+    with _open(path) as f, _damaged(path):
         meta = _metadata(f)
         if "states" not in f:
             raise ValueError(f"'{path}' holds no frames (the run stopped before the first one)")
@@ -353,4 +357,6 @@ __all__ = [
     "read_metadata",
     "read_trajectory",
     "write_trajectory",
+    "write_xdmf",
+    "xdmf_path",
 ]

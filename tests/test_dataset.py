@@ -174,7 +174,7 @@ def test_cli_parses_the_dataset_command():
     )
     assert args.vary == [("kinematic_viscosity", (0.005, 0.02))]
     assert args.case_arg == [("n", 16)] and args.resume and args.seed == 7
-    assert args.func.__name__ == "main_dataset"
+    assert args.command == "dataset"
 
 
 def test_sharded_run_matches_single_device(dataset, tmp_path):

@@ -90,8 +90,8 @@ def test_bad_step_counts(tg):
         sphjax.simulate(tg, t_end=-1.0)
     with pytest.raises(ValueError, match="n_steps must be a positive integer"):
         sphjax.simulate(tg, n_steps=0)
-    with pytest.raises(ValueError, match="save_every=3 must be a positive divisor of n_steps=4"):
-        sphjax.simulate(tg, n_steps=4, save_every=3)
+    with pytest.raises(ValueError, match="save_every must be a positive integer"):
+        sphjax.simulate(tg, n_steps=4, save_every=0)
 
 
 @pytest.mark.parametrize("shift", [1.0, -0.3])
@@ -165,7 +165,7 @@ def test_particle_leaving_a_closed_domain_stops_the_run_and_keeps_frames(tmp_pat
 
 
 def test_time_step_forced_past_the_check_blows_up(monkeypatch, tmp_path):
-    monkeypatch.setattr(sphjax.integrate, "check_time_step", lambda *args: None)
+    monkeypatch.setattr(sphjax.integration.simulate, "check_time_step", lambda *args: None)
     case = sphjax.cases.get("dam_break", n=4)
     path = tmp_path / "blowup.h5"
     with pytest.raises(sphjax.SimulationError, match=r"unstable at step \d+ .* particle \d+"):

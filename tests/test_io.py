@@ -158,3 +158,21 @@ def test_killed_run_keeps_written_frames(tmp_path):
         expected = np.asarray(case.state.position) + frame // 2 + frame % 2
         # the killed process ran in float32, this session in float64
         np.testing.assert_allclose(trajectory.states.position[frame], expected, rtol=1e-6)
+
+
+def test_save_every_that_does_not_divide_the_steps(case, tmp_path):
+    """simulate(save_every=3) over 7 steps: frames at steps 0, 3, 6 and the last at 7, the
+    same states as saving every step, handed to on_frames with their true times."""
+    every = sphjax.simulate(case, n_steps=7, save_every=1)
+    with TrajectoryWriter(tmp_path / "k3.h5", case) as writer:
+        three = sphjax.simulate(case, n_steps=7, save_every=3, on_frames=writer)
+    np.testing.assert_allclose(three.times / case.dt, [0, 3, 6, 7], rtol=1e-12)
+    for name in ("position", "velocity", "density"):
+        np.testing.assert_array_equal(
+            np.asarray(getattr(three.states, name)),
+            np.asarray(getattr(every.states, name))[[0, 3, 6, 7]],
+        )
+    read, _ = read_trajectory(tmp_path / "k3.h5")
+    assert_same_tree(read, three)
+    more = sphjax.simulate(case, n_steps=5, save_every=9)  # longer than the run
+    np.testing.assert_allclose(more.times / case.dt, [0, 5], rtol=1e-12)

@@ -1,7 +1,7 @@
 """Ready-to-run set-ups: ``sphjax.cases.<name>(...) -> Case``.
 
-Each case takes a resolution argument and physical parameters with the defaults of
-VALIDATION.md, and returns a :class:`sphjax.Case` (initial State, static Model,
+Each case takes a resolution argument and physical parameters with the defaults of its
+reference (cited in its docstring), and returns a :class:`sphjax.Case` (initial State, static Model,
 differentiable Params, a stable time step and a default end time).
 """
 

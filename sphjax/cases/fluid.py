@@ -1,4 +1,4 @@
-"""Fluid validation cases (VALIDATION.md, "Fluid cases")."""
+"""Fluid validation cases: Taylor-Green, Poiseuille, hydrostatic tank, dam break."""
 
 from __future__ import annotations
 
@@ -41,7 +41,7 @@ def taylor_green(
     seed: int = 0,
     t_end: float = 1.0,
 ) -> Case:
-    """2D periodic Taylor-Green vortex on ``[0, 1]^2`` (VALIDATION.md).
+    """2D periodic Taylor-Green vortex on ``[0, 1]^2`` (Taylor & Green 1937).
 
     ``u = -U cos(2 pi x) sin(2 pi y)``, ``v = U sin(2 pi x) cos(2 pi y)``,
     ``p = -(U^2 / 4)(cos 4 pi x + cos 4 pi y)``, ``nu = U / Re``, ``c0 = 10 U``.
@@ -176,7 +176,7 @@ def poiseuille(
 
 
 def poiseuille_startup_speed(y, t, width, viscosity, body_force, terms: int = 200):
-    """Analytic start-up velocity ``u(y, t)`` of Poiseuille flow (series, VALIDATION.md)."""
+    """Analytic start-up velocity ``u(y, t)`` of Poiseuille flow (series, Morris et al. 1997)."""
     L, nu, F = width, viscosity, body_force
     u = F / (2 * nu) * y * (L - y)
     for k in range(terms):

@@ -1,4 +1,4 @@
-"""Elastic-solid validation cases (VALIDATION.md, "Solid cases"), total-Lagrangian SPH.
+"""Elastic-solid validation cases, total-Lagrangian SPH.
 
 * :func:`oscillating_plate` — Gray, Monaghan & Swift (2001) cantilever plate, clamped over
   an extra length, released with the first bending mode as velocity profile.
@@ -29,7 +29,7 @@ from sphjax.integration.timestep import stable_time_step
 from sphjax.physics.solid.penalty import PenaltyForce
 from sphjax.physics.solid.system import SolidSystem
 
-# Gray, Monaghan & Swift (2001) first bending mode: k L = 1.87510 (VALIDATION.md).
+# Gray, Monaghan & Swift (2001) first bending mode: k L = 1.87510.
 PLATE_KL = 1.8751040687
 
 
@@ -38,7 +38,7 @@ def plate_mode_shape(s, kL: float = PLATE_KL):
 
     ``f(s) = [M (cos kLs - cosh kLs) - N (sin kLs - sinh kLs)] / Q`` with
     ``M = sin kL + sinh kL``, ``N = cos kL + cosh kL``,
-    ``Q = 2 (cos kL sinh kL - sin kL cosh kL)`` (VALIDATION.md, oscillating plate).
+    ``Q = 2 (cos kL sinh kL - sin kL cosh kL)`` (Gray, Monaghan & Swift 2001).
     """
     s = np.asarray(s, float)
     M = math.sin(kL) + math.sinh(kL)
@@ -184,7 +184,7 @@ def oscillating_plate(
     return _finish("oscillating_plate", x, velocity, kind, dx, rho, model, params, t_end, info, cfl)
 
 
-# Turek & Hron (2006) CSM3 reference (VALIDATION.md): tip u_y = -63.607 +- 65.160 mm,
+# Turek & Hron (2006) CSM3 reference: tip u_y = -63.607 +- 65.160 mm,
 # u_x = -14.305 +- 14.305 mm, 1.0995 Hz.
 TUREK_HRON_CSM3 = dict(
     uy_mean=-63.607e-3,

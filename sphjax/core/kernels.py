@@ -147,7 +147,7 @@ def grad_W(kernel: Kernel, dr, r, h, dim: int):
 
     Args:
       dr: ``[..., d]`` pair vector ``r_a - r_b``.
-      r: ``[...]`` its length, already guarded (see :func:`sphjax.space.safe_norm`).
+      r: ``[...]`` its length, already guarded (see :func:`sphjax.core.space.safe_norm`).
     """
     r_safe = jnp.where(r > 0, r, 1.0)
     factor = jnp.where(r > 0, dW_dr(kernel, r_safe, h, dim) / r_safe, 0.0)

@@ -55,7 +55,7 @@ class Model:
       domain: the simulation box and its periodic axes.
       systems: the systems, in the order of their particle blocks in the State
         (e.g. ``(FluidSystem(...), WallSystem(...))``).
-      kernel: smoothing kernel (see :mod:`sphjax.kernels`).
+      kernel: smoothing kernel (see :mod:`sphjax.core.kernels`).
       neighbor_capacity: multiplier on the measured neighbour count that sizes each
         neighbour list; raise it if a run reports a neighbour-list overflow.
       neighbor_skin: Verlet skin as a fraction of the support radius; the list is

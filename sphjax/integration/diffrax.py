@@ -8,8 +8,8 @@ diffrax integrates ``dy/dt = f(t, y, args)``.  Here
   constant per-particle arrays of the initial :class:`~sphjax.State` (mass, kind,
   reference positions, volumes) and a neighbour-list template that fixes the capacity;
 * the term :class:`SPHTerm` evaluates :func:`sphjax.evaluate` (eqs. 5, 10-12, 14-19) at
-  ``y``, with neighbour lists rebuilt at ``y``.  Its vector field returns :class:`Rates` (velocity, acceleration, density rate
-  and the evaluated density — summation density and wall extrapolation are algebraic,
+  ``y``, with neighbour lists rebuilt at ``y``.  Its vector field returns :class:`Rates`
+  (velocity, acceleration, density rate and the evaluated density — summation density and wall extrapolation are algebraic,
   not integrated); ``prod(rates, dt)`` turns them into an increment of ``y``, so any
   explicit diffrax solver can integrate it too.
 

@@ -1,0 +1,273 @@
+"""``sphjax run``: build the case from the command line, plan the saving, run, report.
+
+Imported by :mod:`sphjax.cli` only when a command needs the solver (this imports JAX).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import difflib
+import inspect
+import math
+import sys
+import time
+from pathlib import Path
+
+import jax.numpy as jnp
+import numpy as np
+
+from sphjax import cases
+from sphjax.cli import CHUNK_STEPS, DEFAULT_FRAMES, EXIT_OK, EXIT_UNSTABLE, UsageError
+from sphjax.integration.timestep import check_time_step, stable_time_step
+
+# ---------------------------------------------------------------------------- the case
+
+
+def _check_case_value(name: str, key: str, value, default):
+    """A --case-arg value of the type of the argument's default (numbers, flags, names)."""
+    what = None
+    if isinstance(default, bool):
+        if not isinstance(value, bool):
+            what = "True or False"
+    elif isinstance(default, int | float):
+        if isinstance(value, bool) or not isinstance(value, int | float):
+            what = "a number"
+        elif isinstance(default, int) and isinstance(value, float) and value.is_integer():
+            value = int(value)
+        elif not math.isfinite(value):
+            what = "a finite number"
+    elif isinstance(default, str) and not isinstance(value, str):
+        value = str(value)
+    if what is not None:
+        raise UsageError(
+            "--case-arg", f"{key}={value!r}: case {name!r} expects {what} (default {default!r})"
+        )
+    return value
+
+
+def build_case(name: str, case_args: dict, *, n=None, dx=None, t_end=None):
+    """The case ``name`` with ``--case-arg`` values and ``--n``/``--dx``/``--t-end``."""
+    if name not in cases.CASES:
+        close = difflib.get_close_matches(name, cases.CASES, n=1)
+        hint = f" (did you mean {close[0]!r}?)" if close else ""
+        raise UsageError(
+            "CASE", f"unknown case {name!r}{hint}; available cases: {', '.join(cases.CASES)}"
+        )
+    accepted = inspect.signature(cases.CASES[name]).parameters
+    kwargs = {}
+    for key, value in case_args.items():
+        if key not in accepted:
+            raise UsageError(
+                "--case-arg",
+                f"case {name!r} has no argument {key!r}; it accepts {', '.join(accepted)}",
+            )
+        given = {"n": "--dx" if dx is not None else "--n" if n is not None else None,
+                 "t_end": "--t-end" if t_end is not None else None}.get(key)  # fmt: skip
+        if given:
+            raise UsageError("--case-arg", f"{key} is also given by {given}; give it once")
+        kwargs[key] = _check_case_value(name, key, value, accepted[key].default)
+    if n is not None:
+        kwargs["n"] = n
+    if t_end is not None and "t_end" in accepted:
+        kwargs["t_end"] = t_end
+    try:
+        case = cases.get(name, dx=dx, **kwargs)
+    except (ValueError, TypeError) as err:
+        message = str(err)
+        named = [k for k in case_args if message.startswith(k) or f" {k} " in message]
+        argument = (
+            "--case-arg" if named
+            else "--dx" if dx is not None
+            else "--n" if n is not None
+            else "--case-arg" if case_args
+            else "CASE"
+        )  # fmt: skip
+        raise UsageError(argument, message) from None
+    if t_end is not None and "t_end" not in accepted:
+        case = case.replace(t_end=t_end)
+    return case
+
+
+def apply_sets(case, sets: list[tuple[str, float | tuple]]):
+    """``case`` with ``--set FIELD=VALUE`` applied to its Params.
+
+    The case's time step is shortened in proportion when the new values lower the stable
+    step (a larger sound speed or Young's modulus), so the case's Courant number is kept.
+    """
+    if not sets:
+        return case
+    changes = {}
+    fields = [name for name, _ in case.params.items()]
+    for name, value in sets:
+        if name not in fields:
+            raise UsageError(
+                "--set",
+                f"{name!r} is not a parameter of this case; choose one of {', '.join(fields)}",
+            )
+        old = np.asarray(getattr(case.params, name))
+        new = np.asarray(value, dtype=float)
+        if new.shape != old.shape:
+            example = ",".join(f"{v:g}" for v in old.ravel()) if old.ndim else f"{float(old):g}"
+            count = "a number" if old.ndim == 0 else f"{old.size} comma-separated numbers"
+            raise UsageError(
+                "--set", f"{name} takes {count} (now {name}={example}), got {name}={value}"
+            )
+        changes[name] = jnp.asarray(new, old.dtype)
+    try:
+        params = case.params.replace(**changes)
+    except (ValueError, TypeError) as err:
+        raise UsageError("--set", str(err)) from None
+    before = stable_time_step(case.state, case.model, case.params)
+    after = stable_time_step(case.state, case.model, params)
+    dt = case.dt * min(1.0, after / before) if before > 0 and math.isfinite(after) else case.dt
+    return case.replace(params=params, dt=dt)
+
+
+# ---------------------------------------------------------------------------- saving
+
+
+def _divisors(n: int) -> list[int]:
+    small = [d for d in range(1, math.isqrt(n) + 1) if n % d == 0]
+    return sorted(set(small + [n // d for d in small]))
+
+
+def default_save_every(n_steps: int) -> int:
+    """About DEFAULT_FRAMES frames: a divisor of ``n_steps`` giving 50-100 frames if
+    there is one (every frame the same interval), else ``ceil(n_steps / 100)``."""
+    if n_steps <= DEFAULT_FRAMES:
+        return 1
+    for d in _divisors(n_steps):
+        if DEFAULT_FRAMES // 2 <= n_steps // d <= DEFAULT_FRAMES:
+            return d
+    return math.ceil(n_steps / DEFAULT_FRAMES)
+
+
+def frames_per_chunk(n_frames: int, save_every: int) -> int:
+    """A divisor of ``n_frames`` so every chunk has the same length (one compilation)."""
+    fitting = [d for d in _divisors(max(n_frames, 1)) if d * save_every <= CHUNK_STEPS]
+    return max(fitting) if fitting else 1
+
+
+@dataclasses.dataclass
+class Plan:
+    dt: float
+    n_steps: int
+    save_every: int
+    note: str = ""
+
+    @property
+    def n_frames(self) -> int:
+        """Saved frames, the initial one and a last one at the end time included."""
+        full, rest = divmod(self.n_steps, self.save_every)
+        return 1 + full + (rest > 0)
+
+
+def plan(case, *, dt=None, t_end=None, save_every=None, save_dt=None) -> Plan:
+    """Time step, number of steps and save interval, checked before anything runs."""
+    note = ""
+    if dt is not None:
+        try:
+            check_time_step(dt, case.state, case.model, case.params)
+        except ValueError as err:
+            raise UsageError("--dt", str(err)) from None
+    step = case.dt if dt is None else dt
+    if save_dt is not None:
+        ratio = save_dt / step
+        if dt is not None:
+            if ratio < 1 - 1e-9 or abs(ratio - round(ratio)) > 1e-6 * ratio:
+                lo = max(1, math.floor(ratio)) * dt
+                raise UsageError(
+                    "--save-dt",
+                    f"{save_dt:g} is not a whole number of --dt {dt:g} steps; use e.g. "
+                    f"--save-dt {lo:g} or {lo + dt:g}, or leave out --dt",
+                )
+        else:
+            k = max(1, math.ceil(ratio - 1e-9))
+            if step != save_dt / k:
+                note = f" (shortened from {step:.4g} so frames fall every {save_dt:g})"
+            step = save_dt / k
+        save_every = max(1, round(save_dt / step))
+    t_end = case.t_end if t_end is None else t_end
+    n_steps = max(1, math.ceil(t_end / step - 1e-9))  # the rule of sphjax.simulate
+    if save_every is None:
+        save_every = default_save_every(n_steps)
+    return Plan(step, n_steps, save_every, note)
+
+
+# ---------------------------------------------------------------------------- run
+
+
+def run_case(args, out: Path) -> int:
+    from tqdm import tqdm
+
+    from sphjax.integration.simulate import NeighborOverflowError, SimulationError, simulate
+    from sphjax.io import TrajectoryWriter
+
+    case = build_case(args.case, dict(args.case_arg), n=args.n, dx=args.dx, t_end=args.t_end)
+    case = apply_sets(case, args.set)
+    p = plan(case, dt=args.dt, t_end=args.t_end, save_every=args.save_every, save_dt=args.save_dt)
+    full = p.n_steps // p.save_every
+    chunk = frames_per_chunk(full, p.save_every) * p.save_every
+    dx = case.info.get("dx", float("nan"))
+    print(
+        f"{case.name}: {case.n_particles} particles (dx = {dx:.4g}), "
+        f"{p.n_steps} steps of dt = {p.dt:.4g}{p.note} to t = {p.n_steps * p.dt:.4g}, "
+        f"saving every {p.save_every} steps ({p.n_frames} frames) to {out}",
+        file=sys.stderr,
+    )
+    attrs = {
+        "command": ["sphjax", *args.argv],
+        "n_steps": p.n_steps,
+        "save_every": p.save_every,
+    }
+    try:
+        writer = TrajectoryWriter(out, case, dt=p.dt, attrs=attrs, argument="--out")
+    except (ValueError, OSError) as err:
+        raise UsageError(None, str(err)) from None
+    bar = tqdm(total=p.n_steps, unit="step", disable=args.quiet, file=sys.stderr)
+    start = time.perf_counter()
+    first_chunk_end = []
+
+    def progress(n):
+        if not first_chunk_end:
+            first_chunk_end.append((time.perf_counter(), n))
+        bar.update(n)
+
+    with writer:
+        try:
+            simulate(
+                case, dt=p.dt, n_steps=p.n_steps, save_every=p.save_every, on_frames=writer,
+                progress=progress, steps_per_chunk=chunk,
+            )  # fmt: skip
+        except SimulationError as err:
+            bar.close()
+            writer.set_error(str(err))
+            print(
+                f"sphjax run: error: {err}\nstopped at step {err.step}, particle "
+                f"{err.particle}; the {writer.n_frames} frames before it are in {out}. "
+                "Try a smaller --dt.",
+                file=sys.stderr,
+            )
+            return EXIT_UNSTABLE
+        except NeighborOverflowError as err:
+            bar.close()
+            writer.set_error(str(err))
+            print(
+                f"sphjax run: error: {err}\nthe {writer.n_frames} frames before it are in {out}.",
+                file=sys.stderr,
+            )
+            return EXIT_UNSTABLE
+    bar.close()
+    wall = time.perf_counter() - start
+    rate = case.n_particles * p.n_steps / wall
+    lines = [
+        f"done: {case.n_particles} particles, {p.n_steps} steps, {wall:.2f} s wall, "
+        f"{rate:.3g} particle-steps/s",
+    ]
+    if first_chunk_end and first_chunk_end[0][1] < p.n_steps:
+        t1, n1 = first_chunk_end[0]
+        steady = case.n_particles * (p.n_steps - n1) / (time.perf_counter() - t1)
+        lines.append(f"      {steady:.3g} particle-steps/s after the first chunk (compilation)")
+    lines.append(f"      {writer.n_frames} frames in {out} (ParaView: open {writer.xdmf})")
+    print("\n".join(lines))
+    return EXIT_OK

@@ -1,0 +1,41 @@
+"""Output paths checked before any work (standard library only, so the CLI answers fast)."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+
+def check_writable(path, argument: str = "path") -> Path:
+    """Raise a ValueError naming ``argument`` if a file cannot be written at ``path``.
+
+    Call this before a run starts, so a long simulation never ends in an unwritable path.
+    Returns ``path`` as a :class:`~pathlib.Path`.
+    """
+    if path is None or str(path) == "":
+        raise ValueError(f"{argument}: an output file name is required, e.g. run.h5")
+    path = Path(path)
+    parent = path.parent if str(path.parent) else Path(".")
+    if path.is_dir():
+        raise ValueError(
+            f"{argument}: '{path}' is a directory; give a file name inside it, "
+            f"e.g. '{path / 'run.h5'}'"
+        )
+    if not parent.exists():
+        raise ValueError(
+            f"{argument}: cannot write '{path}': directory '{parent}' does not exist; "
+            f"create it first (mkdir -p '{parent}') or choose another path"
+        )
+    if not parent.is_dir():
+        raise ValueError(f"{argument}: cannot write '{path}': '{parent}' is not a directory")
+    if not os.access(parent, os.W_OK | os.X_OK):
+        raise ValueError(
+            f"{argument}: cannot write '{path}': directory '{parent}' is not writable; "
+            "choose a path in a directory you can write to"
+        )
+    if path.exists() and not os.access(path, os.W_OK):
+        raise ValueError(
+            f"{argument}: cannot overwrite '{path}': the file is read-only; "
+            "remove it, change its permissions or choose another path"
+        )
+    return path
