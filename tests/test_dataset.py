@@ -76,10 +76,11 @@ def test_layout_shapes_dtypes_and_metadata(dataset):
             assert np.all(t == 0) and np.all(np.isfinite(x))
             assert np.all((x >= 0) & (x < 1))
             assert 0.008 <= attrs["kinematic_viscosity"] <= 0.012
-    # trajectories differ (random initial velocities), the first frame does not
+    # trajectories differ from the first frame on: the Taylor-Green disorder is drawn per
+    # trajectory from --seed, not shared through the case's own seed
     train = _read(dataset, "train")
     assert not np.allclose(train["00000"][0][1], train["00001"][0][1])
-    np.testing.assert_array_equal(train["00000"][0][0], train["00001"][0][0])
+    assert not np.allclose(train["00000"][0][0], train["00001"][0][0])
 
 
 def test_statistics_recomputed_independently(dataset):
