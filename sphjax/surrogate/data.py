@@ -177,11 +177,15 @@ def window_index(data: Trajectories, history: int, horizon: int = 1) -> np.ndarr
     return np.stack(np.meshgrid(np.arange(n_traj), starts, indexing="ij"), -1).reshape(-1, 2)
 
 
-def windows(data: Trajectories, index: np.ndarray, history: int):
-    """Gather windows: ``(positions [B, H+1, N, d], target [B, N, d], types [B, N])``."""
+def windows(data: Trajectories, index: np.ndarray, history: int, unroll: int = 0):
+    """Gather windows: ``(positions [B, H+1+unroll, N, d], target [B, N, d], types [B, N])``.
+
+    ``unroll > 0`` (push-forward training) adds the ``unroll`` frames the model will
+    predict itself before the target; they serve the non-fluid particles (walls follow
+    the ground truth)."""
     index = np.asarray(index)
     traj, start = index[:, 0], index[:, 1]
-    frames = start[:, None] + np.arange(history + 2)[None, :]
+    frames = start[:, None] + np.arange(history + 2 + unroll)[None, :]
     seq = data.positions[traj[:, None], frames]
     return seq[:, :-1], seq[:, -1], data.particle_type[traj]
 
