@@ -36,7 +36,7 @@ def main(argv=None) -> dict:
     p.add_argument("--train-nu", type=float, nargs="+", default=[0.008, 0.012])
     p.add_argument("--test-nu", type=float, default=0.01)
     p.add_argument("--latent", type=int, default=16)
-    p.add_argument("--lr", type=float, default=3e-3)
+    p.add_argument("--lr", type=float, default=1e-3)
     p.add_argument("--small", action="store_true", help="a minute-long smoke run")
     args = p.parse_args(argv)
     if args.small:

@@ -302,6 +302,7 @@ def train(
     iterations: int | None = None,
     seconds: float | None = None,
     lr: float = 1e-3,
+    clip: float = 1.0,
     refresh_every: int = 25,
     seed: int = 0,
     log=print,
@@ -312,7 +313,8 @@ def train(
     the start state is the model's own rollout at ``s`` (refreshed every
     ``refresh_every`` iterations, no gradient through it), the loss the mean over the
     ``unroll`` steps of the squared relative probe-velocity error against the fine
-    reference.  Budget: ``iterations`` and/or wall-clock ``seconds`` (after compiling).
+    reference.  Adam with gradients clipped to global norm ``clip``.  Budget:
+    ``iterations`` and/or wall-clock ``seconds`` (after compiling).
     """
     if iterations is None and seconds is None:
         raise ValueError("give iterations or seconds (the training budget)")
@@ -328,7 +330,8 @@ def train(
         _, fields, over = rollout(problem, net, mode, state, params, unroll, neighbors)
         return jnp.mean(relative_error(fields, ref) ** 2), over
 
-    optimizer = optax.adam(lr)
+    # clipped gradients: an unrolled solver has occasional large gradients
+    optimizer = optax.chain(optax.clip_by_global_norm(clip), optax.adam(lr))
     opt_state = optimizer.init(eqx.filter(net, eqx.is_array))
 
     @eqx.filter_jit
