@@ -37,14 +37,18 @@ def main(argv=None) -> dict:
     p.add_argument("--test-nu", type=float, default=0.01)
     p.add_argument("--latent", type=int, default=16)
     p.add_argument("--lr", type=float, default=1e-3)
+    p.add_argument("--fine-seeds", type=int, default=4, help="fine runs averaged (disorders)")
     p.add_argument("--small", action="store_true", help="a minute-long smoke run")
     args = p.parse_args(argv)
     if args.small:
-        args.n, args.horizon, args.unroll, args.seconds = 8, 20, 5, 10.0
+        args.n, args.horizon, args.unroll, args.seconds, args.fine_seeds = 8, 20, 5, 10.0, 2
 
     t0 = time.perf_counter()
     coarse = sphjax.cases.taylor_green(n=args.n)
-    fine = sphjax.cases.taylor_green(n=args.ratio * args.n)
+    # the fine reference: the mean over an ensemble of disordered starts (--fine-seeds)
+    fine = [
+        sphjax.cases.taylor_green(n=args.ratio * args.n, seed=s) for s in range(args.fine_seeds)
+    ]
     make = dict(horizon=args.horizon, ratio=args.ratio, probes_per_side=16)
     train_problem = sil.make_problem(coarse, fine, viscosities=args.train_nu, **make)
     test_problem = sil.make_problem(coarse, fine, viscosities=[args.test_nu], **make)
@@ -55,7 +59,7 @@ def main(argv=None) -> dict:
         settings=dict(
             vars(args),
             coarse_particles=coarse.n_particles,
-            fine_particles=fine.n_particles,
+            fine_particles=fine[0].n_particles,
             dt_coarse=train_problem.dt,
             setup_seconds=setup_seconds,
         ),

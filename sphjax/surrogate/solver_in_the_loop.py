@@ -87,7 +87,8 @@ class Problem:
     """A coarse set-up, its fine reference and the probes (built by :func:`make_problem`).
 
     Attributes:
-      coarse, fine: the two cases (same physics, different resolution).
+      coarse, fine: the two cases (same physics, different resolution; ``fine`` is the
+        first of the fine ensemble).
       ratio: fine solver steps per coarse step (``dt_coarse = ratio * dt_fine``).
       dt: the coarse step.
       probes: ``[P, d]`` comparison points.
@@ -113,7 +114,7 @@ class Problem:
 
 def make_problem(
     coarse: Case,
-    fine: Case,
+    fine,
     *,
     horizon: int,
     ratio: int,
@@ -123,37 +124,46 @@ def make_problem(
 ) -> Problem:
     """Simulate the fine reference for each kinematic viscosity in ``viscosities``.
 
-    The coarse step is ``dt`` (default the coarse case's stable step) and the fine one
-    ``dt / ratio`` (checked against the fine stability limit by :func:`sphjax.simulate`).
+    ``fine`` is a Case or a list of Cases (an ensemble, e.g. Taylor-Green with several
+    ``seed``s of the disordered start): the reference is the mean of their probe fields,
+    which removes the part of the fine field that comes from one particular particle
+    disorder (no coarse model could predict it).  The coarse step is ``dt`` (default the
+    coarse case's stable step) and the fine one ``dt / ratio`` (checked against the fine
+    stability limit by :func:`sphjax.simulate`).
     """
-    if int(ratio) < 1:
+    if isinstance(ratio, bool) or int(ratio) != ratio or int(ratio) < 1:
         raise ValueError(
             f"ratio must be a positive integer (fine steps per coarse step), got {ratio}"
         )
     if int(horizon) < 1:
         raise ValueError(f"horizon must be a positive number of coarse steps, got {horizon}")
-    if coarse.model.domain != fine.model.domain:
-        raise ValueError("coarse and fine cases must share one domain (the probes lie in it)")
+    fines = list(fine) if isinstance(fine, list | tuple) else [fine]
+    if not fines:
+        raise ValueError("fine must be a Case or a non-empty list of Cases")
+    for f in fines:
+        if coarse.model.domain != f.model.domain:
+            raise ValueError("coarse and fine cases must share one domain (the probes lie in it)")
     dt = float(coarse.dt if dt is None else dt)
     probes = probe_grid(coarse, probes_per_side)
     conditions, reference = [], []
+
+    def with_nu(params, nu):
+        return params.replace(kinematic_viscosity=jnp.asarray(nu, params.kinematic_viscosity.dtype))
+
     for nu in viscosities:
-        pc = coarse.params.replace(
-            kinematic_viscosity=jnp.asarray(nu, coarse.params.kinematic_viscosity.dtype)
-        )
-        pf = fine.params.replace(
-            kinematic_viscosity=jnp.asarray(nu, fine.params.kinematic_viscosity.dtype)
-        )
-        traj = simulate(fine, pf, n_steps=horizon * ratio, save_every=ratio, dt=dt / ratio)
-        states = traj.states
-        # the fine field seen at the coarse resolution: the coarse kernel and h
-        ref = jax.vmap(lambda s: probe_velocity(s, coarse, probes))(states)
-        conditions.append((pc, pf))
-        reference.append(np.asarray(ref))
+        fields = []
+        for f in fines:
+            traj = simulate(
+                f, with_nu(f.params, nu), n_steps=horizon * ratio, save_every=ratio, dt=dt / ratio
+            )
+            # the fine field seen at the coarse resolution: the coarse kernel and h
+            fields.append(jax.vmap(lambda s: probe_velocity(s, coarse, probes))(traj.states))
+        conditions.append((with_nu(coarse.params, nu), with_nu(fines[0].params, nu)))
+        reference.append(np.mean(np.stack([np.asarray(u) for u in fields]), 0))
     speed = float(np.abs(np.asarray(coarse.state.velocity)).max()) or 1.0
     return Problem(
         coarse=coarse,
-        fine=fine,
+        fine=fines[0],
         ratio=int(ratio),
         dt=dt,
         probes=probes,
