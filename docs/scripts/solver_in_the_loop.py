@@ -38,6 +38,9 @@ def main(argv=None) -> dict:
     p.add_argument("--latent", type=int, default=16)
     p.add_argument("--lr", type=float, default=1e-3)
     p.add_argument("--fine-seeds", type=int, default=4, help="fine runs averaged (disorders)")
+    p.add_argument(
+        "--networks", nargs="+", default=["correction", "gns"], choices=["correction", "gns"]
+    )
     p.add_argument("--small", action="store_true", help="a minute-long smoke run")
     args = p.parse_args(argv)
     if args.small:
@@ -65,7 +68,8 @@ def main(argv=None) -> dict:
         ),
     )
     curves = {"coarse solver": sil.errors(test_problem, None)[0]}
-    for mode, name in [("correction", "solver + correction"), ("gns", "pure GNS")]:
+    names = {"correction": "solver + correction", "gns": "pure GNS"}
+    for mode, name in [(m, names[m]) for m in args.networks]:
         net = sil.Corrector(train_problem, jax.random.PRNGKey(0), mode=mode, latent=args.latent)
         res = sil.train(
             train_problem, net, mode=mode, unroll=args.unroll, seconds=args.seconds, lr=args.lr
@@ -82,7 +86,8 @@ def main(argv=None) -> dict:
     coarse_err = results["coarse solver"]
     results["ratio to coarse"] = {
         name: {k: results[name][k] / coarse_err[k] for k in coarse_err if k != "curve"}
-        for name in ("solver + correction", "pure GNS")
+        for name in curves
+        if name != "coarse solver"
     }
     Path(args.out).parent.mkdir(parents=True, exist_ok=True)
     Path(args.out).write_text(json.dumps(results, indent=1))
