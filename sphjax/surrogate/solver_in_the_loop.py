@@ -5,7 +5,7 @@ is the reference.  After every coarse solver step a graph network adds a velocit
 correction to the fluid particles (Um et al. 2020, "Solver-in-the-Loop: Learning from
 Differentiable Physics to Interact with Iterative PDE-Solvers", NeurIPS):
 
-    s_{k+1} = C_theta(S_coarse(s_k)),   C_theta(s): v_i <- v_i + c tanh(GNS_theta(s)_i)
+    s_{k+1} = C_theta(S_coarse(s_k)),   C_theta(s): v_i <- v_i + c * GNS_theta(s)_i
 
 and ``theta`` is trained by back-propagating through ``unroll`` such steps, the solver
 included (:func:`sphjax.simulate` is differentiable in the state and the Params), so the
@@ -174,14 +174,10 @@ def make_problem(
 
 
 class Corrector(eqx.Module):
-    """Graph network on the coarse particles: velocity increments ``[N, d]`` per step,
-    ``c tanh(GNS)`` for the correction (at most ``c = 0.01 U`` per component and step),
-    ``a GNS`` for the pure network (``a = 2 pi U^2 dt``, the scale of the whole
-    acceleration)."""
+    """Graph network on the coarse particles: velocity increments ``[N, d]`` per step."""
 
     gns: GNS
     scale: float = eqx.field(static=True)
-    bounded: bool = eqx.field(static=True)
 
     def __init__(self, problem: Problem, key, mode: str = "correction", latent=16, steps=2):
         if mode not in MODES:
@@ -196,8 +192,6 @@ class Corrector(eqx.Module):
         # a correction is a small fraction of the speed per step; the pure network must
         # carry the whole acceleration, ~ 2 pi U^2 / L per unit time (L = 1)
         self.scale = 0.01 * u if mode == "correction" else 2 * np.pi * u * u * dt
-        # the correction is bounded (tanh): an unbounded one made training diverge
-        self.bounded = mode == "correction"
 
     def __call__(self, state: State, graph: RadiusGraph, neighbors, speed: float):
         x, v = state.position, state.velocity
@@ -214,8 +208,6 @@ class Corrector(eqx.Module):
         edge = jnp.where(mask[..., None], jnp.concatenate([dr, r, dv], -1), 0.0)
         types = jnp.zeros(n, jnp.int32)
         out = self.gns(v / speed, types, edge, senders, mask)
-        if self.bounded:  # at most ``scale`` per component and step: cannot blow up the run
-            out = jnp.tanh(out)
         fluid = (state.kind == Kind.FLUID)[:, None]
         return jnp.where(fluid, self.scale * out, 0.0), neighbors
 
