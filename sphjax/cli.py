@@ -335,6 +335,17 @@ def _add_dataset(sub) -> None:
         help="relative size of the random divergence-free velocity field",
     )
     p.add_argument("--modes", type=_positive_int, default=2, help="largest wavenumber of it")
+    p.add_argument(
+        "--jitter",
+        type=_non_negative_float,
+        default=0.0,
+        help="largest random displacement of fluid particles per axis, in units of dx",
+    )
+    p.add_argument(
+        "--same-case-seed",
+        action="store_true",
+        help="keep the case's own seed (e.g. the Taylor-Green disorder) for every trajectory",
+    )
     p.add_argument("--dt", type=_positive_float, default=None, help="solver step (default: stable)")
     p.add_argument(
         "--batch-size",
@@ -574,9 +585,16 @@ def cmd_dataset(args) -> int:
     except ValueError as err:
         raise UsageError("--vary", str(err).removeprefix("vary: ")) from None
     try:
-        perturbation = Perturbation(tuple(args.amplitude), args.fourier, args.modes)
+        perturbation = Perturbation(
+            tuple(args.amplitude),
+            args.fourier,
+            args.modes,
+            case_seed=not args.same_case_seed,
+            jitter=args.jitter,
+        )
     except ValueError as err:
         raise UsageError("--amplitude", str(err)) from None
+    timings: dict = {}
     try:
         out = generate_dataset(
             case,
@@ -595,6 +613,7 @@ def cmd_dataset(args) -> int:
             overwrite=args.overwrite,
             progress=not args.no_progress,
             case_kwargs=dict(args.case_arg),
+            timings=timings,
         )
     except (ValueError, FileExistsError) as err:
         argument = "--dt" if args.dt is not None and "dt" in str(err) else "--out"
@@ -602,7 +621,11 @@ def cmd_dataset(args) -> int:
     except RuntimeError as err:  # a trajectory went unstable
         print(f"sphjax dataset: error: {err}", file=sys.stderr)
         return EXIT_UNSTABLE
-    print(f"wrote {out}")
+    n, seconds = timings.get("trajectories", 0), timings.get("seconds", 0.0)
+    print(
+        f"wrote {out}: {n} trajectories simulated in {seconds:.1f} s "
+        f"({timings.get('per_minute', 0.0):.1f} trajectories per minute, compilation included)"
+    )
     return EXIT_OK
 
 

@@ -76,10 +76,11 @@ def test_layout_shapes_dtypes_and_metadata(dataset):
             assert np.all(t == 0) and np.all(np.isfinite(x))
             assert np.all((x >= 0) & (x < 1))
             assert 0.008 <= attrs["kinematic_viscosity"] <= 0.012
-    # trajectories differ (random initial velocities), the first frame does not
+    # trajectories differ from the first frame on: the Taylor-Green disorder is drawn per
+    # trajectory from --seed, not shared through the case's own seed
     train = _read(dataset, "train")
     assert not np.allclose(train["00000"][0][1], train["00001"][0][1])
-    np.testing.assert_array_equal(train["00000"][0][0], train["00001"][0][0])
+    assert not np.allclose(train["00000"][0][0], train["00001"][0][0])
 
 
 def test_statistics_recomputed_independently(dataset):
@@ -201,3 +202,82 @@ def test_sharded_run_matches_single_device(dataset, tmp_path):
         assert sorted(a) == sorted(b)
         for k in a:
             np.testing.assert_allclose(a[k][0], b[k][0], rtol=0, atol=1e-6)
+
+
+def test_seed_draws_the_case_disorder_per_trajectory():
+    """--seed changes every trajectory's start, the Taylor-Green disorder included; the
+    same seed gives the same start whatever the split sizes (no simulation; ~10 s, the
+    case is rebuilt per trajectory)."""
+    import sphjax
+    from sphjax.dataset import Perturbation, initial_conditions
+
+    case = sphjax.cases.taylor_green(n=8)
+    p = Perturbation((0.8, 1.2), 0.3, 2)
+    a = initial_conditions(case, (3, 1, 0), p, {}, 1, {"n": 8})
+    b = initial_conditions(case, (2, 0, 0), p, {}, 1, {"n": 8})
+    c = initial_conditions(case, (3, 1, 0), p, {}, 2, {"n": 8})
+    x = lambda jobs, k: np.asarray(jobs[k][2].position)  # noqa: E731
+    np.testing.assert_array_equal(x(a, 1), x(b, 1))  # trajectory 1 of train, either way
+    assert not np.allclose(x(a, 0), x(a, 1))  # a disorder per trajectory
+    assert not np.allclose(x(a, 0), x(c, 0))  # another seed, another disorder
+    assert not np.allclose(x(a, 0), np.asarray(case.state.position))  # not the case's own
+    # the old behaviour (every trajectory on the case's positions) stays available
+    same = initial_conditions(case, (2, 0, 0), Perturbation(case_seed=False), {}, 1, {"n": 8})
+    np.testing.assert_array_equal(x(same, 0), np.asarray(case.state.position))
+    # case_kwargs that do not rebuild the given case are refused, naming the fix
+    with pytest.raises(ValueError, match="case_kwargs=.*--case-arg"):
+        initial_conditions(case, (1, 0, 0), p, {}, 1, {"n": 9})
+
+
+def test_dam_break_dataset_walls_and_free_surface(tmp_path):
+    """A 2D dam break (walls, free surface): closed box, wall particles of type 1 that do
+    not move, the column falling under gravity; the loader reads it (~15 s)."""
+    import sphjax
+    from sphjax.dataset import Perturbation, generate_dataset
+    from sphjax.surrogate import data
+
+    case = sphjax.cases.dam_break(n=4)
+    timings = {}
+    out = generate_dataset(
+        case,
+        tmp_path / "dam",
+        n_train=2,
+        n_valid=0,
+        n_test=1,
+        steps=40,
+        write_every=20,
+        perturbation=Perturbation(jitter=0.1),
+        seed=5,
+        progress=False,
+        case_kwargs={"n": 4},
+        timings=timings,
+    )
+    meta = json.loads((out / "metadata.json").read_text())
+    domain = case.model.domain
+    assert meta["periodic_boundary_conditions"] == [False, False]
+    assert meta["bounds"] == [[lo, hi] for lo, hi in zip(domain.lower, domain.upper, strict=True)]
+    assert meta["g_ext_magnitude"] == pytest.approx(9.81)
+    assert meta["density_evolution"] is True and meta["sequence_length_train"] == 3
+    assert timings["trajectories"] == 3 and timings["per_minute"] > 0
+    train = data.load(out, "train")
+    types = train.particle_type[0]
+    fluid, wall = types == 0, types == 1
+    assert fluid.sum() == 4 * 8 and wall.sum() > 0 and np.all(fluid | wall)
+    x = train.positions[0]
+    np.testing.assert_array_equal(x[0, wall], x[-1, wall])  # walls stay put
+    assert x[-1, fluid, 1].mean() < x[0, fluid, 1].mean()  # the column falls
+    # jitter: the two trajectories start from different fluid positions
+    assert not np.allclose(train.positions[0, 0, fluid], train.positions[1, 0, fluid])
+
+
+def test_dataset_command_reports_throughput_and_names_bad_input(tmp_path, capsys):
+    from sphjax.cli import main
+
+    argv = ["dataset", "taylor_green", "--out", str(tmp_path / "d"), "--case-arg", "n=8"]
+    argv += ["--n-train", "1", "--n-valid", "0", "--n-test", "0", "--steps", "4"]
+    argv += ["--write-every", "2", "--no-progress"]
+    assert main(argv) == 0
+    assert "trajectories per minute" in capsys.readouterr().out
+    assert main(argv) == 2  # the folder is not empty: one line, no traceback
+    err = capsys.readouterr().err
+    assert "not empty" in err and "Traceback" not in err and len(err.strip().splitlines()) == 1

@@ -9,8 +9,8 @@ diffrax integrates ``dy/dt = f(t, y, args)``.  Here
   reference positions, volumes) and a neighbour-list template that fixes the capacity;
 * the term :class:`SPHTerm` evaluates :func:`sphjax.evaluate` (eqs. 5, 10-12, 14-19) at
   ``y``, with neighbour lists rebuilt at ``y``.  Its vector field returns :class:`Rates`
-  (velocity, acceleration, density rate and the evaluated density — summation density and wall extrapolation are algebraic,
-  not integrated); ``prod(rates, dt)`` turns them into an increment of ``y``, so any
+  (velocity, acceleration, density rate and the evaluated density — summation density
+  and wall extrapolation are algebraic, not integrated); ``prod(rates, dt)`` turns them into an increment of ``y``, so any
   explicit diffrax solver can integrate it too.
 
 Neighbours inside the vector field: the fluid list is rebuilt at the current positions

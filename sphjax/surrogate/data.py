@@ -19,6 +19,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from sphjax.core.space import minimum_image
+from sphjax.dataset.format import check_metadata
 
 PAD, FLUID = -1, 0
 
@@ -65,7 +66,12 @@ def read_metadata(folder) -> dict:
     path = folder / "metadata.json"
     if not path.exists():
         raise FileNotFoundError(f"{path} not found: {folder} is not a dataset folder")
-    return json.loads(path.read_text())
+    try:
+        meta = json.loads(path.read_text())
+    except json.JSONDecodeError as error:
+        raise ValueError(f"{path} is not valid JSON ({error})") from None
+    check_metadata(meta, str(path))
+    return meta
 
 
 def load(folder, split: str = "train", max_trajectories: int | None = None) -> Trajectories:
@@ -76,15 +82,37 @@ def load(folder, split: str = "train", max_trajectories: int | None = None) -> T
     if not path.exists():
         raise FileNotFoundError(f"{path} not found; splits are train, valid and test")
     xs, ts = [], []
+    dim = int(meta["dim"])
     with h5py.File(path, "r") as f:
         names = sorted(f.keys())[:max_trajectories]
         for name in names:
-            xs.append(np.asarray(f[name]["position"], np.float32))
-            ts.append(np.asarray(f[name]["particle_type"], np.int32))
+            x = np.asarray(f[name]["position"], np.float32)
+            t = np.asarray(f[name]["particle_type"], np.int32)
+            where = f"{path}, trajectory {name}"
+            if x.ndim != 3 or x.shape[-1] != dim:
+                raise ValueError(
+                    f"{where}: position has shape {x.shape}, expected (frames, particles, {dim}) "
+                    f"for dim={dim} in metadata.json"
+                )
+            if t.shape != (x.shape[1],):
+                raise ValueError(
+                    f"{where}: particle_type has shape {t.shape}, expected ({x.shape[1]},)"
+                )
+            if not np.all(np.isfinite(x)):
+                raise ValueError(f"{where}: position holds non-finite values")
+            _check_inside(x, meta, where)
+            xs.append(x)
+            ts.append(t)
     if not xs:
         raise ValueError(f"{path} holds no trajectories")
+    lengths = sorted({x.shape[0] for x in xs})
+    if len(lengths) > 1:
+        raise ValueError(
+            f"{path}: trajectories have different lengths {lengths}; a split must have one "
+            "sequence length"
+        )
     n_max = max(x.shape[1] for x in xs)
-    n_frames = min(x.shape[0] for x in xs)
+    n_frames = lengths[0]
     lower = np.asarray(meta["bounds"], np.float32)[:, 0]
     positions = np.empty((len(xs), n_frames, n_max, xs[0].shape[-1]), np.float32)
     types = np.full((len(xs), n_max), PAD, np.int32)
@@ -93,6 +121,23 @@ def load(folder, split: str = "train", max_trajectories: int | None = None) -> T
         positions[k, :, : x.shape[1]] = x[:n_frames]
         types[k, : t.shape[0]] = t
     return Trajectories(metadata=meta, positions=positions, particle_type=types)
+
+
+def _check_inside(x, meta, where) -> None:
+    """Positions on periodic axes lie in ``[lo, hi]`` (a box that does not fit the data
+    would be scored with wrong minimum images)."""
+    bounds = np.asarray(meta["bounds"], np.float64)
+    size = bounds[:, 1] - bounds[:, 0]
+    for axis, periodic in enumerate(meta["periodic_boundary_conditions"]):
+        if not periodic:
+            continue
+        lo, hi = x[..., axis].min(), x[..., axis].max()
+        tol = 1e-5 * size[axis]
+        if lo < bounds[axis, 0] - tol or hi > bounds[axis, 1] + tol:
+            raise ValueError(
+                f"{where}: positions on periodic axis {axis} span [{lo:.6g}, {hi:.6g}], outside "
+                f"the bounds {bounds[axis].tolist()} of metadata.json"
+            )
 
 
 def displacement(a, b, bounds, periodic):
@@ -132,11 +177,15 @@ def window_index(data: Trajectories, history: int, horizon: int = 1) -> np.ndarr
     return np.stack(np.meshgrid(np.arange(n_traj), starts, indexing="ij"), -1).reshape(-1, 2)
 
 
-def windows(data: Trajectories, index: np.ndarray, history: int):
-    """Gather windows: ``(positions [B, H+1, N, d], target [B, N, d], types [B, N])``."""
+def windows(data: Trajectories, index: np.ndarray, history: int, unroll: int = 0):
+    """Gather windows: ``(positions [B, H+1+unroll, N, d], target [B, N, d], types [B, N])``.
+
+    ``unroll > 0`` (push-forward training) adds the ``unroll`` frames the model will
+    predict itself before the target; they serve the non-fluid particles (walls follow
+    the ground truth)."""
     index = np.asarray(index)
     traj, start = index[:, 0], index[:, 1]
-    frames = start[:, None] + np.arange(history + 2)[None, :]
+    frames = start[:, None] + np.arange(history + 2 + unroll)[None, :]
     seq = data.positions[traj[:, None], frames]
     return seq[:, :-1], seq[:, -1], data.particle_type[traj]
 

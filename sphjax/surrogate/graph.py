@@ -1,10 +1,14 @@
-"""Radius graphs for the learned simulator, with the minimum image on periodic axes.
+"""Radius graphs for the learned simulator, through the package's neighbour search.
 
-A jax-md cell list in dense format: ``idx[i, k]`` is the ``k``-th neighbour (sender) of
-particle ``i`` (receiver) within ``radius``, padded with ``N``.  The capacity ``K`` is set
-when the graph is allocated (outside ``jit``); inside ``jit`` the graph is rebuilt for new
-positions and reports an overflow, and the caller re-allocates (never silently).  Closed
-axes get a box padded by twice the radius so no image reaches across them.
+:class:`RadiusGraph` wraps :class:`sphjax.neighbors.NeighborSearch` (jax-md cell list,
+dense format ``idx[i, k]``: the ``k``-th neighbour, sender, of particle ``i``, receiver;
+padded with ``N``), built for a Model whose kernel support is the connectivity radius
+and whose domain is the dataset's box.  So the surrogate and the solver share one
+neighbour search: the minimum image on periodic axes, the padded box on closed axes and
+the Verlet skin (the list holds every pair within ``radius + skin``; the features mask
+pairs beyond ``radius``).  The capacity ``K`` is set when the graph is allocated
+(outside ``jit``); inside ``jit`` the graph is updated for new positions and reports an
+overflow, and the caller re-allocates (never silently).
 """
 
 from __future__ import annotations
@@ -13,9 +17,10 @@ import dataclasses
 
 import jax
 import jax.numpy as jnp
-import numpy as np
-from jax_md import partition
-from jax_md import space as jmd_space
+
+from sphjax.core.kernels import WendlandC2
+from sphjax.core.neighbors import NeighborSearch
+from sphjax.core.state import Domain, Kind, Model
 
 
 @dataclasses.dataclass(frozen=True)
@@ -28,34 +33,34 @@ class RadiusGraph:
     capacity_multiplier: float = 1.5
 
     @property
-    def box(self) -> np.ndarray:
-        size = np.array([hi - lo for lo, hi in self.bounds])
-        return np.where(np.array(self.periodic), size, size + 4.0 * self.radius)
-
-    def _to_box(self, x):
-        lo = np.array([lo for lo, _ in self.bounds])
-        offset = np.where(np.array(self.periodic), -lo, -lo + 2.0 * self.radius)
-        return jnp.mod(x + offset.astype(x.dtype), self.box.astype(x.dtype))
-
-    def _fns(self):
-        displacement, _ = jmd_space.periodic(self.box)
-        return partition.neighbor_list(
-            displacement,
-            self.box,
-            r_cutoff=self.radius,
-            dr_threshold=0.0,
-            capacity_multiplier=self.capacity_multiplier,
-            format=partition.Dense,
+    def model(self) -> Model:
+        """A Model whose support radius is ``radius`` (Wendland C2, support ``2h``)."""
+        kernel = WendlandC2()
+        return Model(
+            dim=len(self.bounds),
+            smoothing_length=float(self.radius) / kernel.support,
+            kernel=kernel,
+            domain=Domain(
+                tuple(float(lo) for lo, _ in self.bounds),
+                tuple(float(hi) for _, hi in self.bounds),
+                tuple(bool(p) for p in self.periodic),
+            ),
+            particle_kinds=(Kind.FLUID,),
+            neighbor_capacity=float(self.capacity_multiplier),
         )
+
+    @property
+    def search(self) -> NeighborSearch:
+        return NeighborSearch(self.model, x64=bool(jax.config.jax_enable_x64))
 
     def allocate(self, position, extra_capacity: int = 0):
         """A neighbour list for concrete ``[N, d]`` positions (outside ``jit``)."""
-        x = self._to_box(jnp.asarray(position, jnp.float32))
-        return self._fns().allocate(x, extra_capacity=extra_capacity)
+        return self.search.allocate(jnp.asarray(position), extra_capacity)
 
     def update(self, position, neighbors):
-        """Rebuild for ``position`` with the capacity of ``neighbors`` (jittable)."""
-        return self._fns().update(self._to_box(position), neighbors)
+        """Neighbours at ``position`` with the capacity of ``neighbors`` (jittable; always
+        rebuilt: successive calls see unrelated windows in training)."""
+        return self.search.rebuild(position, neighbors)
 
 
 def overflowed(neighbors) -> jax.Array:

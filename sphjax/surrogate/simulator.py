@@ -27,7 +27,6 @@ from sphjax.surrogate.data import (
     FLUID,
     PAD,
     Normalization,
-    Trajectories,
     displacement,
     frame_velocities,
     wrap,
@@ -189,19 +188,39 @@ class LearnedSimulator:
         v_next = displacement(target, positions[-1], self.bounds, self.periodic)
         return (v_next - v_last - self.norm.acc_mean) / self.norm.acc_std
 
-    def loss(self, model, positions, target, types, key, neighbors):
-        """Mean squared error of normalised accelerations over fluid particles of a batch
-        ``[B, H+1, N, d]``; returns ``(loss, overflow)``."""
+    def loss(self, model, positions, target, types, key, neighbors, unroll: int = 0):
+        """Mean squared error of normalised accelerations over fluid particles of a batch;
+        returns ``(loss, overflow)``.
+
+        ``positions`` is ``[B, H+1+unroll, N, d]``.  With ``unroll = 0`` the input history
+        gets GNS random-walk noise and the target its correction (one-step training).
+        With ``unroll = u > 0`` (push-forward, Brandstetter et al. 2022, as LagrangeBench):
+        the noisy history is advanced ``u`` steps by the model itself under
+        ``stop_gradient`` (non-fluid particles follow the ground truth), and the loss is
+        the error of the next step from that predicted history against the true
+        ``target``, so the model learns to correct its own drift."""
         keys = jax.random.split(key, positions.shape[0])
+        h1 = positions.shape[1] - unroll
+        fixed_model = jax.lax.stop_gradient(model)
 
         def one(x, y, t, k):
-            x, y = self.noisy_inputs(x, y, t, k)
-            x = wrap(x, self.bounds, self.periodic)
-            node, edge, senders, mask, nbrs = self._features(x, t, neighbors)
+            hist, y_noisy = self.noisy_inputs(x[:h1], y, t, k)
+            hist = wrap(hist, self.bounds, self.periodic)
+            nbrs = neighbors
+            if unroll == 0:
+                y = y_noisy
+            moving = (t == FLUID)[:, None]
+            over = jnp.asarray(False)
+            for j in range(unroll):
+                new, nbrs = self.step(fixed_model, hist, t, nbrs)
+                new = jax.lax.stop_gradient(jnp.where(moving, new, x[h1 + j]))
+                hist = jnp.concatenate([hist[1:], new[None].astype(hist.dtype)], 0)
+                over = over | overflowed(nbrs)
+            node, edge, senders, mask, nbrs = self._features(hist, t, nbrs)
             pred = model(node, t, edge, senders, mask)
-            err = jnp.sum((pred - self.target_acceleration(x, y)) ** 2, -1)
+            err = jnp.sum((pred - self.target_acceleration(hist, y)) ** 2, -1)
             fluid = (t == FLUID).astype(err.dtype)
-            return jnp.sum(err * fluid), jnp.sum(fluid), overflowed(nbrs)
+            return jnp.sum(err * fluid), jnp.sum(fluid), over | overflowed(nbrs)
 
         err, count, over = jax.vmap(one)(positions, target, types, keys)
         return jnp.sum(err) / jnp.maximum(jnp.sum(count), 1.0), jnp.any(over)
@@ -223,66 +242,3 @@ class LearnedSimulator:
         sim = cls(info["metadata"], SimulatorConfig(**info["config"]))
         model = eqx.tree_deserialise_leaves(path, sim.init_model(jax.random.PRNGKey(0)))
         return sim, model
-
-
-# ---------------------------------------------------------------------------- metrics
-
-
-def kinetic_energy(frames, bounds, periodic, frame_dt, fluid):
-    """``0.5 <|v|^2>`` over fluid particles per frame, ``v`` = displacement / frame_dt.
-    ``frames`` is ``[T, N, d]``; returns ``[T-1]``."""
-    v = frame_velocities(frames, bounds, periodic) / frame_dt
-    w = fluid.astype(v.dtype)
-    return 0.5 * jnp.sum(jnp.sum(v * v, -1) * w, -1) / jnp.maximum(jnp.sum(w), 1.0)
-
-
-def rollout_metrics(
-    sim: LearnedSimulator,
-    model,
-    data: Trajectories,
-    n_steps: int = 20,
-    starts=(0,),
-    report=(1, 5, 10, 20),
-) -> dict:
-    """Position MSE at rollout steps ``report`` and kinetic-energy MSE, averaged over the
-    trajectories of ``data`` and the start frames ``starts``; ``model=None`` gives the
-    constant-velocity baseline.
-
-    The position MSE is the mean over fluid particles of ``|x_pred - x_true|^2`` (minimum
-    image); the kinetic-energy MSE is the mean over the rollout of
-    ``(KE_pred - KE_true)^2`` with ``KE = 0.5 <|v|^2>`` from per-frame displacements.
-    """
-    h = sim.config.history
-    n_frames = data.positions.shape[1]
-    n_steps = min(n_steps, n_frames - h - 1)
-    starts = [s for s in starts if s + h + n_steps < n_frames] or [0]
-    neighbors = sim.allocate(data.positions[0, h])
-    errors, ke_errors = [], []
-    run = sim.compiled_rollout(n_steps)
-
-    for k in range(len(data)):
-        types = jnp.asarray(data.particle_type[k])
-        fluid = types == FLUID
-        for s in starts:
-            x0 = jnp.asarray(data.positions[k, s : s + h + 1])
-            truth = jnp.asarray(data.positions[k, s + h + 1 : s + h + 1 + n_steps])
-            for _ in range(5):
-                frames, over = run(model, x0, types, truth, neighbors)
-                if not bool(over):
-                    break
-                neighbors = sim.allocate(data.positions[k, s + h], 4 + neighbors.idx.shape[-1])
-            d = displacement(frames, truth, sim.bounds, sim.periodic)
-            err = jnp.sum(jnp.sum(d * d, -1) * fluid, -1) / jnp.sum(fluid)
-            errors.append(np.asarray(err))
-            seq_p = jnp.concatenate([x0[-1:], frames])
-            seq_t = jnp.concatenate([x0[-1:], truth])
-            ke_p = kinetic_energy(seq_p, sim.bounds, sim.periodic, sim.frame_dt, fluid)
-            ke_t = kinetic_energy(seq_t, sim.bounds, sim.periodic, sim.frame_dt, fluid)
-            ke_errors.append(float(jnp.mean((ke_p - ke_t) ** 2)))
-    mse = np.mean(np.stack(errors), 0)
-    out = {f"mse_{r}": float(mse[r - 1]) for r in report if r <= n_steps}
-    out["mse_mean"] = float(mse.mean())
-    out["ke_mse"] = float(np.mean(ke_errors))
-    out["n_steps"] = int(n_steps)
-    out["mse_curve"] = mse.tolist()
-    return out

@@ -1,0 +1,238 @@
+"""Regenerate every number, plot and the shipped weights of docs/surrogates.md.
+
+    python docs/scripts/surrogate_figures.py --work runs/figures            # full size, ~2 h
+    python docs/scripts/surrogate_figures.py --work /tmp/fig --small        # minutes
+
+1. the Taylor-Green dataset with exactly the command printed in docs/surrogates.md
+   (:data:`DATASET_COMMAND`; the tests check the two agree), trajectories long enough for
+   100-step rollouts;
+2. a graph network simulator trained one-step and one trained with push-forward, the same
+   wall-clock budget each;
+3. rollout metrics over 100 steps on the test split (LagrangeBench's and ours) for both
+   and the constant-velocity baseline -> ``docs/figures/tg_metrics.json``; plots
+   ``tg_rollout.png`` and ``tg_rollout_mse.png``;
+4. solver in the loop (``docs/scripts/solver_in_the_loop.py``) -> ``sil_tg.json`` and
+   ``sil_tg.png``;
+5. with ``--write-model``: the one-step model to ``docs/models/tg32_gns.eqx``.
+
+Writes into ``docs/`` only with ``--write-docs`` (otherwise into ``--work``).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import shlex
+import sys
+import time
+from pathlib import Path
+
+import jax
+import numpy as np
+
+HERE = Path(__file__).resolve().parent
+DOCS = HERE.parent
+
+# The command printed in docs/surrogates.md ("Reproduce"); DIR is replaced by the folder.
+DATASET_COMMAND = (
+    "sphjax dataset taylor_green --out DIR --case-arg n=32 --n-train 32 --n-valid 4 "
+    "--n-test 4 --steps 600 --write-every 5 --vary kinematic_viscosity=0.0075:0.015 "
+    "--amplitude 0.7:1.1 --fourier 0.2 --seed 1 --batch-size 8"
+)
+# the same ensemble at a size that runs in a minute (the tests and --small)
+SMALL_OVERRIDES = {
+    "--case-arg": "n=12",
+    "--n-train": "2",
+    "--n-valid": "1",
+    "--n-test": "1",
+    "--steps": "130",
+}
+ROLLOUT, SMALL_ROLLOUT = 100, 14
+HISTORY = 5
+
+
+def dataset_argv(folder, small: bool = False) -> list[str]:
+    """``DATASET_COMMAND`` as an argv list for :func:`sphjax.cli.main` (without the
+    leading ``sphjax``), optionally at the small size."""
+    argv = shlex.split(DATASET_COMMAND)[1:]
+    argv[argv.index("DIR")] = str(folder)
+    if small:
+        for flag, value in SMALL_OVERRIDES.items():
+            argv[argv.index(flag) + 1] = value
+    return argv
+
+
+def make_dataset(folder: Path, small: bool) -> None:
+    from sphjax.cli import main
+
+    if (folder / "metadata.json").exists():
+        return
+    argv = dataset_argv(folder, small) + (["--resume"] if (folder / "INCOMPLETE").exists() else [])
+    if main(argv) != 0:
+        raise SystemExit(f"dataset command failed: sphjax {shlex.join(argv)}")
+
+
+def train_models(train_set, valid_set, seconds: float, small: bool):
+    from sphjax.surrogate import LearnedSimulator, SimulatorConfig, train
+
+    config = SimulatorConfig(
+        history=HISTORY,
+        latent=16 if small else 32,
+        hidden=16 if small else 32,
+        message_steps=2 if small else 3,
+    )
+    sim = LearnedSimulator(train_set.metadata, config)
+    runs = {}
+    for name, pushforward, weights in [
+        ("gns", (0,), None),
+        ("gns_pushforward", (0, 1, 3), (6, 2, 1)),
+    ]:
+        result = train(
+            sim,
+            sim.init_model(jax.random.PRNGKey(1)),
+            train_set,
+            valid_set,
+            seconds=seconds,
+            batch_size=2,
+            lr=1e-3,
+            lr_final=1e-5,
+            seed=1,
+            eval_every=100 if small else 500,
+            eval_rollout=20 if not small else 8,
+            pushforward=pushforward,
+            pushforward_weights=weights,
+        )
+        runs[name] = result
+        print(f"{name}: {result.steps} steps in {result.seconds:.0f} s")
+    return sim, runs
+
+
+def plot_mse(metrics: dict, path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(5.5, 3.6))
+    for name, m in metrics.items():
+        curve = np.asarray(m["lb_mse_curve"])
+        ax.semilogy(np.arange(1, len(curve) + 1), curve, label=name)
+    ax.set_xlabel("rollout step")
+    ax.set_ylabel("position MSE per step (LagrangeBench)")
+    ax.legend()
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def plot_rollout(sim, model, test, path: Path, n_steps: int) -> None:
+    import jax.numpy as jnp
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    h = sim.config.history
+    types = jnp.asarray(test.particle_type[0])
+    x0 = jnp.asarray(test.positions[0, : h + 1])
+    truth = test.positions[0, h + 1 : h + 1 + n_steps]
+    frames, _ = sim.compiled_rollout(n_steps)(
+        model, x0, types, jnp.asarray(truth), sim.allocate(x0[-1])
+    )
+    frames = np.asarray(frames)
+    shows = sorted({0, n_steps // 2, n_steps - 1})
+    fig, axes = plt.subplots(2, len(shows), figsize=(3.2 * len(shows), 6.4), squeeze=False)
+    for col, k in enumerate(shows):
+        for row, (x, title) in enumerate([(truth[k], "SPH"), (frames[k], "GNS")]):
+            ax = axes[row, col]
+            ax.scatter(x[:, 0], x[:, 1], s=3, c=np.arange(len(x)), cmap="twilight")
+            ax.set_title(f"{title}, rollout step {k + 1}")
+            ax.set_aspect("equal")
+            ax.set_xticks([])
+            ax.set_yticks([])
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def plot_sil(results: dict, path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(5.5, 3.6))
+    for name in ("coarse solver", "solver + correction", "pure GNS"):
+        curve = np.asarray(results[name]["curve"])
+        ax.plot(np.arange(len(curve)), curve, label=name)
+    ax.set_yscale("log")
+    ax.set_xlabel("coarse step")
+    ax.set_ylabel("relative probe-velocity error")
+    ax.legend()
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def main(argv=None) -> dict:
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    p.add_argument("--work", type=Path, required=True, help="folder for the dataset and runs")
+    p.add_argument("--seconds", type=float, default=1800.0, help="training budget per model")
+    p.add_argument("--sil-seconds", type=float, default=900.0, help="solver-in-the-loop budget")
+    p.add_argument("--small", action="store_true", help="a run of minutes (checks the script)")
+    p.add_argument("--write-docs", action="store_true", help="write into docs/figures")
+    p.add_argument("--write-model", action="store_true", help="write docs/models/tg32_gns.eqx")
+    args = p.parse_args(argv)
+    if args.small:
+        args.seconds, args.sil_seconds = 10.0, 10.0
+    from sphjax.surrogate import data, rollout_metrics
+
+    work = args.work
+    figures = DOCS / "figures" if args.write_docs else work / "figures"
+    figures.mkdir(parents=True, exist_ok=True)
+    folder = work / ("tg12" if args.small else "tg32")
+    t0 = time.perf_counter()
+    make_dataset(folder, args.small)
+    dataset_seconds = time.perf_counter() - t0
+    train_set, valid_set, test_set = (data.load(folder, s) for s in ("train", "valid", "test"))
+    sim, runs = train_models(train_set, valid_set, args.seconds, args.small)
+    n_steps = SMALL_ROLLOUT if args.small else ROLLOUT
+    metrics = {
+        name: rollout_metrics(sim, run.model, test_set, n_steps=n_steps)
+        for name, run in runs.items()
+    }
+    metrics["constant velocity"] = rollout_metrics(sim, None, test_set, n_steps=n_steps)
+    out = dict(
+        metrics=metrics,
+        dataset=dict(
+            command=shlex.join(["sphjax", *dataset_argv(folder, args.small)]),
+            seconds=dataset_seconds,
+            metadata=train_set.metadata,
+        ),
+        training={n: dict(steps=r.steps, seconds=r.seconds) for n, r in runs.items()},
+        config=dict(sim.config.__dict__),
+    )
+    (figures / "tg_metrics.json").write_text(json.dumps(out, indent=1))
+    plot_mse(metrics, figures / "tg_rollout_mse.png")
+    plot_rollout(sim, runs["gns"].model, test_set, figures / "tg_rollout.png", n_steps)
+    if args.write_model:
+        sim.save(runs["gns"].model, DOCS / "models" / "tg32_gns.eqx")
+
+    sys.path.insert(0, str(HERE))
+    import solver_in_the_loop
+
+    sil_argv = ["--out", str(figures / "sil_tg.json"), "--seconds", str(args.sil_seconds)]
+    sil = solver_in_the_loop.main(sil_argv + (["--small"] if args.small else []))
+    plot_sil(sil, figures / "sil_tg.png")
+
+    print("| metric | " + " | ".join(metrics) + " |")
+    print("|---|" + "---:|" * len(metrics))
+    keys = [k for k in metrics["gns"] if k.startswith("lb_") and k != "lb_mse_curve"]
+    for key in keys:
+        print(f"| {key} | " + " | ".join(f"{m[key]:.3e}" for m in metrics.values()) + " |")
+    print(f"wrote {figures}")
+    return out
+
+
+if __name__ == "__main__":
+    main()

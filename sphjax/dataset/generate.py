@@ -1,0 +1,242 @@
+"""Simulate an ensemble of a case and write it in the LagrangeBench layout.
+
+Each trajectory starts from the case's initial state with a seeded random change and
+with the Params named in ``vary`` drawn uniformly from their ranges
+(:mod:`sphjax.dataset.perturb`); batches run as one compiled ``jax.vmap`` of
+:func:`sphjax.simulate` (:mod:`sphjax.dataset.runner`); the files and metadata follow
+:mod:`sphjax.dataset.format`.
+
+Generation is resumable: finished trajectories go to ``DIR/.partial/`` one file each, an
+``INCOMPLETE`` marker holds the plan, and only when every trajectory is done are the HDF5
+files and ``metadata.json`` written and the marker removed.  An interrupted folder is
+never mistaken for a dataset: it has no ``metadata.json``, and :func:`generate_dataset`
+with ``resume=True`` (CLI ``--resume``) continues it.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import math
+import os
+import shutil
+import time
+from collections.abc import Mapping
+from pathlib import Path
+
+import h5py
+import jax
+import numpy as np
+
+from sphjax.core.case import Case
+from sphjax.dataset.format import FORMAT_VERSION, metadata, particle_types, statistics
+from sphjax.dataset.perturb import SPLITS, Perturbation, check_vary, initial_conditions
+from sphjax.dataset.runner import cached_runner
+from sphjax.integration.timestep import check_time_step, stable_time_step
+
+MARKER = "INCOMPLETE"
+PARTIAL = ".partial"
+
+
+def _plan(case, counts, steps, write_every, vary, perturbation, seed, dt, case_kwargs):
+    return dict(
+        format_version=FORMAT_VERSION,
+        case=case.name,
+        case_kwargs=case_kwargs,
+        counts=dict(zip(SPLITS, counts, strict=True)),
+        steps=steps,
+        write_every=write_every,
+        vary={k: list(v) for k, v in vary.items()},
+        perturbation=dataclasses.asdict(perturbation),
+        seed=seed,
+        dt=dt,
+        n_particles=case.n_particles,
+    )
+
+
+def _json_roundtrip(obj):
+    return json.loads(json.dumps(obj))
+
+
+def generate_dataset(
+    case: Case,
+    out,
+    *,
+    n_train: int,
+    n_valid: int,
+    n_test: int,
+    steps: int,
+    write_every: int,
+    vary: Mapping[str, tuple[float, float]] | None = None,
+    perturbation: Perturbation | None = None,
+    seed: int = 0,
+    dt: float | None = None,
+    batch_size: int | None = None,
+    resume: bool = False,
+    overwrite: bool = False,
+    progress: bool = True,
+    devices=None,
+    case_kwargs: dict | None = None,
+    stop_after: int | None = None,
+    timings: dict | None = None,
+) -> Path:
+    """Simulate an ensemble of ``case`` and write it to ``out`` in the LagrangeBench layout.
+
+    Args:
+      case: the base set-up (``sphjax.cases.<name>(...)``).
+      out: dataset folder (created).
+      n_train, n_valid, n_test: trajectories per split.
+      steps: solver steps per trajectory; a multiple of ``write_every``.  Each trajectory
+        has ``steps // write_every + 1`` frames.
+      write_every: solver steps between frames.
+      vary: ``{Params field: (lo, hi)}`` drawn uniformly per trajectory.
+      perturbation: the random initial condition (default: 20 % random Fourier field,
+        velocity scale in ``[0.75, 1.25]``, the case's own ``seed`` redrawn per
+        trajectory).
+      seed: base seed; trajectory ``i`` of a split draws everything random from
+        ``(seed, split, i)``.
+      dt: solver step (default: the smallest stable step over all trajectories).
+      batch_size: trajectories per compiled call (default 4 per device).
+      resume: continue an interrupted folder (its ``INCOMPLETE`` plan must match).
+      overwrite: replace whatever ``out`` holds.
+      progress: show a tqdm bar over trajectories.
+      devices: JAX devices to shard over (default: all).
+      case_kwargs: recorded in the metadata (how ``case`` was built).
+      stop_after: stop after this many batches, leaving the folder incomplete (tests).
+      timings: a dict filled with ``trajectories`` (simulated in this call), ``seconds``
+        (wall clock, compilation included) and ``per_minute`` (trajectories per minute).
+    Returns:
+      the dataset folder, or the incomplete folder if stopped early.
+    """
+    from tqdm.auto import tqdm
+
+    counts = [int(n_train), int(n_valid), int(n_test)]
+    for name, n in zip(("n_train", "n_valid", "n_test"), counts, strict=True):
+        if n < 0:
+            raise ValueError(f"{name} must be >= 0, got {n}")
+    if counts[0] < 1:
+        raise ValueError("n_train must be >= 1 (the statistics come from the training split)")
+    if write_every < 1 or steps < 2 * write_every or steps % write_every:
+        raise ValueError(
+            f"steps={steps} must be a multiple of write_every={write_every} and give at least "
+            "3 frames (steps >= 2 * write_every)"
+        )
+    vary = check_vary(case.params, dict(vary or {}))
+    perturbation = Perturbation((0.75, 1.25), 0.2) if perturbation is None else perturbation
+    out = Path(out)
+    marker, partial = out / MARKER, out / PARTIAL
+
+    # the whole ensemble's initial conditions, deterministic per trajectory
+    jobs = initial_conditions(case, counts, perturbation, vary, seed, case_kwargs or {})
+    if dt is None:
+        dt = min(stable_time_step(s, case.model, p) for _, _, s, p in jobs)
+    dt = float(dt)
+    for split, i, s, p in jobs:
+        try:
+            check_time_step(dt, s, case.model, p)
+        except ValueError as error:
+            raise ValueError(f"trajectory {split}/{i}: {error}") from None
+    plan = _json_roundtrip(
+        _plan(case, counts, steps, write_every, vary, perturbation, seed, dt, case_kwargs or {})
+    )
+
+    # the folder
+    if out.exists() and any(out.iterdir()):
+        if overwrite:
+            shutil.rmtree(out)
+        elif marker.exists() and resume:
+            old = json.loads(marker.read_text())
+            if old != plan:
+                raise ValueError(
+                    f"{out} holds an incomplete dataset made with other settings; resume it "
+                    "with the same arguments, or pass overwrite=True (--overwrite)"
+                )
+        elif marker.exists():
+            raise FileExistsError(
+                f"{out} holds an incomplete dataset; pass resume=True (--resume) to continue it "
+                "or overwrite=True (--overwrite) to start afresh"
+            )
+        else:
+            raise FileExistsError(f"{out} is not empty; choose another folder or overwrite")
+    try:
+        partial.mkdir(parents=True, exist_ok=True)
+    except OSError as error:
+        raise OSError(f"cannot write the dataset folder {out}: {error}") from None
+    if not marker.exists():
+        marker.write_text(json.dumps(plan, indent=1))
+
+    def part_file(split, i):
+        return partial / f"{split}_{i:05d}.npy"
+
+    todo = [job for job in jobs if not part_file(job[0], job[1]).exists()]
+    devices = list(jax.devices() if devices is None else devices)
+    batch_size = 4 * len(devices) if batch_size is None else int(batch_size)
+    batch_size = min(batch_size, max(1, len(todo)))
+    batch_size = len(devices) * math.ceil(batch_size / len(devices))
+    started = time.perf_counter()
+    runner = cached_runner(case, dt, steps, write_every, devices) if todo else None
+    bar = tqdm(
+        total=len(jobs),
+        initial=len(jobs) - len(todo),
+        desc="trajectories",
+        unit="traj",
+        disable=not progress,
+    )
+    try:
+        for b, start in enumerate(range(0, len(todo), batch_size)):
+            if stop_after is not None and b >= stop_after:
+                return out
+            batch = todo[start : start + batch_size]
+            positions = runner([j[2] for j in batch], [j[3] for j in batch], batch_size)
+            for (split, i, _, _), x in zip(batch, positions, strict=True):
+                _check_finite(x, split, i)
+                tmp = partial / f"tmp_{split}_{i:05d}.npy"
+                np.save(tmp, x.astype(np.float32))
+                os.replace(tmp, part_file(split, i))
+            bar.update(len(batch))
+    finally:
+        bar.close()
+    if timings is not None:
+        seconds = time.perf_counter() - started
+        timings.update(
+            trajectories=len(todo),
+            seconds=seconds,
+            per_minute=60.0 * len(todo) / seconds if seconds > 0 else float("inf"),
+        )
+
+    _assemble(out, case, plan, jobs, part_file)
+    return out
+
+
+def _check_finite(x, split, i):
+    if not np.all(np.isfinite(x)):
+        frame = int(np.argmax(~np.all(np.isfinite(x), axis=(1, 2))))
+        raise RuntimeError(
+            f"trajectory {split}/{i} went unstable (non-finite positions from frame {frame}); "
+            "shorten --steps, reduce the perturbation or choose a smaller dt"
+        )
+
+
+def _assemble(out: Path, case: Case, plan: dict, jobs, part_file) -> None:
+    """Write the HDF5 splits and metadata.json from the partial files; remove the marker."""
+    types = particle_types(case)
+    domain = case.model.domain
+    bounds = [[float(lo), float(hi)] for lo, hi in zip(domain.lower, domain.upper, strict=True)]
+    periodic = [bool(p) for p in domain.periodic]
+    params_of = {(s, i): p for s, i, _, p in jobs}
+    for split in SPLITS:
+        tmp = out / f".{split}.h5.tmp"
+        with h5py.File(tmp, "w") as f:
+            for i in range(plan["counts"][split]):
+                g = f.create_group(f"{i:05d}")
+                g.create_dataset("position", data=np.load(part_file(split, i)))
+                g.create_dataset("particle_type", data=types)
+                for name in plan["vary"]:
+                    g.attrs[name] = float(getattr(params_of[(split, i)], name))
+        os.replace(tmp, out / f"{split}.h5")
+    train = [np.load(part_file("train", i)) for i in range(plan["counts"]["train"])]
+    stats = statistics(train, [types] * len(train), bounds, periodic)
+    meta = metadata(case, plan, bounds, periodic, types, stats)
+    (out / "metadata.json").write_text(json.dumps(meta, indent=2))
+    shutil.rmtree(out / PARTIAL)
+    (out / MARKER).unlink()

@@ -1,0 +1,397 @@
+"""Solver in the loop: a learned correction of a coarse sphjax simulation.
+
+A coarse simulation (fewer particles, a larger time step) is cheap but wrong; a fine one
+is the reference.  After every coarse solver step a graph network adds a velocity
+correction to the fluid particles (Um et al. 2020, "Solver-in-the-Loop: Learning from
+Differentiable Physics to Interact with Iterative PDE-Solvers", NeurIPS):
+
+    s_{k+1} = C_theta(S_coarse(s_k)),   C_theta(s): v_i <- v_i + c * GNS_theta(s)_i
+
+and ``theta`` is trained by back-propagating through ``unroll`` such steps, the solver
+included (:func:`sphjax.simulate` is differentiable in the state and the Params), so the
+network learns what the coarse solver gets wrong *along its own trajectory*.
+
+The two resolutions have different particles, so they are compared on a fixed set of
+probe points: the velocity field is interpolated with the SPH kernel, normalised by
+Shepard's sum (``u(p) = sum_b V_b u_b W(p - x_b, h) / sum_b V_b W(p - x_b, h)``, ``V_b =
+m_b / rho_b``, fluid particles, minimum image), for both simulations with the coarse
+kernel and smoothing length, so that the comparison sees the fine field at the coarse
+resolution rather than the difference of two smoothings.  The error at step ``k`` is the relative
+L2 error of the probe field against the fine simulation at the same time,
+``e_k = (sum_p |u_k(p) - u^fine_k(p)|^2 / sum_p |u^fine_k(p)|^2)^(1/2)``.
+
+The pure-network baseline (``mode="gns"``) is the same graph network used without the
+solver: ``v <- v + a GNS(s)``, ``x <- x + dt v`` (wrapped on periodic axes), trained the
+same way; the solver alone is ``net=None``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+import optax
+
+from sphjax import kernels
+from sphjax.core.case import Case
+from sphjax.core.space import minimum_image
+from sphjax.core.state import Kind, Params, State
+from sphjax.integration.simulate import simulate
+from sphjax.surrogate.gns import GNS
+from sphjax.surrogate.graph import RadiusGraph, overflowed
+
+MODES = ("correction", "gns")
+
+
+def probe_grid(case: Case, per_side: int) -> np.ndarray:
+    """Cell centres of a ``per_side^d`` grid over the case's domain, ``[P, d]``."""
+    domain = case.model.domain
+    axes = [
+        lo + (np.arange(per_side) + 0.5) * (hi - lo) / per_side
+        for lo, hi in zip(domain.lower, domain.upper, strict=True)
+    ]
+    return np.stack(np.meshgrid(*axes, indexing="ij"), -1).reshape(-1, len(axes))
+
+
+def probe_velocity(state: State, case: Case, probes, smoothing_length=None) -> jax.Array:
+    """SPH-interpolated velocity at ``probes`` ``[P, d]`` (Shepard-normalised, fluid only)
+    with the kernel of ``case`` and ``smoothing_length`` (default the case's ``h``)."""
+    model = case.model
+    h = model.smoothing_length if smoothing_length is None else smoothing_length
+    domain = model.domain
+    size = jnp.asarray(domain.size, state.position.dtype)
+    dr = minimum_image(
+        jnp.asarray(probes, state.position.dtype)[:, None, :] - state.position[None, :, :],
+        size,
+        domain.periodic,
+    )
+    r = jnp.sqrt(jnp.sum(dr * dr, -1))
+    w = kernels.W(model.kernel, r, h, model.dim)
+    fluid = (state.kind == Kind.FLUID).astype(w.dtype)
+    wv = w * (state.mass / state.density * fluid)[None, :]
+    return (wv @ state.velocity) / jnp.maximum(jnp.sum(wv, -1, keepdims=True), 1e-30)
+
+
+def relative_error(u, reference) -> jax.Array:
+    """``(sum |u - u_ref|^2 / sum |u_ref|^2)^(1/2)`` over the probes (last two axes)."""
+    num = jnp.sum((u - reference) ** 2, (-2, -1))
+    return jnp.sqrt(num / jnp.maximum(jnp.sum(reference**2, (-2, -1)), 1e-30))
+
+
+@dataclasses.dataclass(frozen=True)
+class Problem:
+    """A coarse set-up, its fine reference and the probes (built by :func:`make_problem`).
+
+    Attributes:
+      coarse, fine: the two cases (same physics, different resolution; ``fine`` is the
+        first of the fine ensemble).
+      ratio: fine solver steps per coarse step (``dt_coarse = ratio * dt_fine``).
+      dt: the coarse step.
+      probes: ``[P, d]`` comparison points.
+      conditions: per training/test condition, the coarse and fine Params.
+      reference: ``[n_conditions, horizon + 1, P, d]`` fine probe velocities at the
+        coarse step times.
+      speed: velocity scale of the network's inputs and outputs.
+    """
+
+    coarse: Case
+    fine: Case
+    ratio: int
+    dt: float
+    probes: np.ndarray
+    conditions: tuple
+    reference: np.ndarray
+    speed: float
+
+    @property
+    def horizon(self) -> int:
+        return self.reference.shape[1] - 1
+
+
+def make_problem(
+    coarse: Case,
+    fine,
+    *,
+    horizon: int,
+    ratio: int,
+    viscosities,
+    probes_per_side: int = 16,
+    dt: float | None = None,
+) -> Problem:
+    """Simulate the fine reference for each kinematic viscosity in ``viscosities``.
+
+    ``fine`` is a Case or a list of Cases (an ensemble, e.g. Taylor-Green with several
+    ``seed``s of the disordered start): the reference is the mean of their probe fields,
+    which removes the part of the fine field that comes from one particular particle
+    disorder (no coarse model could predict it).  The coarse step is ``dt`` (default the
+    coarse case's stable step) and the fine one ``dt / ratio`` (checked against the fine
+    stability limit by :func:`sphjax.simulate`).
+    """
+    if isinstance(ratio, bool) or int(ratio) != ratio or int(ratio) < 1:
+        raise ValueError(
+            f"ratio must be a positive integer (fine steps per coarse step), got {ratio}"
+        )
+    if int(horizon) < 1:
+        raise ValueError(f"horizon must be a positive number of coarse steps, got {horizon}")
+    fines = list(fine) if isinstance(fine, list | tuple) else [fine]
+    if not fines:
+        raise ValueError("fine must be a Case or a non-empty list of Cases")
+    for f in fines:
+        if coarse.model.domain != f.model.domain:
+            raise ValueError("coarse and fine cases must share one domain (the probes lie in it)")
+    dt = float(coarse.dt if dt is None else dt)
+    probes = probe_grid(coarse, probes_per_side)
+    conditions, reference = [], []
+
+    def with_nu(params, nu):
+        return params.replace(kinematic_viscosity=jnp.asarray(nu, params.kinematic_viscosity.dtype))
+
+    for nu in viscosities:
+        fields = []
+        for f in fines:
+            traj = simulate(
+                f, with_nu(f.params, nu), n_steps=horizon * ratio, save_every=ratio, dt=dt / ratio
+            )
+            # the fine field seen at the coarse resolution: the coarse kernel and h
+            fields.append(jax.vmap(lambda s: probe_velocity(s, coarse, probes))(traj.states))
+        conditions.append((with_nu(coarse.params, nu), with_nu(fines[0].params, nu)))
+        reference.append(np.mean(np.stack([np.asarray(u) for u in fields]), 0))
+    speed = float(np.abs(np.asarray(coarse.state.velocity)).max()) or 1.0
+    return Problem(
+        coarse=coarse,
+        fine=fines[0],
+        ratio=int(ratio),
+        dt=dt,
+        probes=probes,
+        conditions=tuple(conditions),
+        reference=np.stack(reference),
+        speed=speed,
+    )
+
+
+class Corrector(eqx.Module):
+    """Graph network on the coarse particles: velocity increments ``[N, d]`` per step."""
+
+    gns: GNS
+    scale: float = eqx.field(static=True)
+
+    def __init__(self, problem: Problem, key, mode: str = "correction", latent=16, steps=2):
+        if mode not in MODES:
+            raise ValueError(f"mode must be one of {', '.join(MODES)}, got {mode!r}")
+        d = problem.coarse.model.dim
+        gns = GNS(d, 2 * d + 1, d, key, latent=latent, hidden=latent, steps=steps)
+        # start from "no correction": the zero decoder output (the coarse solver exactly)
+        last = gns.decoder.weights[-1]
+        gns = eqx.tree_at(lambda g: g.decoder.weights[-1], gns, jnp.zeros_like(last))
+        self.gns = gns
+        u, dt = problem.speed, problem.dt
+        # a correction is a small fraction of the speed per step; the pure network must
+        # carry the whole acceleration, ~ 2 pi U^2 / L per unit time (L = 1)
+        self.scale = 0.01 * u if mode == "correction" else 2 * np.pi * u * u * dt
+
+    def __call__(self, state: State, graph: RadiusGraph, neighbors, speed: float):
+        x, v = state.position, state.velocity
+        n = x.shape[0]
+        neighbors = graph.update(x, neighbors)
+        idx = neighbors.idx
+        senders = jnp.where(idx < n, idx, 0)
+        size = jnp.asarray([hi - lo for lo, hi in graph.bounds], x.dtype)
+        dr = minimum_image(x[:, None, :] - x[senders], size, graph.periodic) / graph.radius
+        r2 = jnp.sum(dr * dr, -1, keepdims=True)
+        r = jnp.sqrt(jnp.where(r2 > 0, r2, 1.0)) * (r2 > 0)
+        mask = (idx < n) & (r[..., 0] < 1.0)
+        dv = (v[:, None, :] - v[senders]) / speed
+        edge = jnp.where(mask[..., None], jnp.concatenate([dr, r, dv], -1), 0.0)
+        types = jnp.zeros(n, jnp.int32)
+        out = self.gns(v / speed, types, edge, senders, mask)
+        fluid = (state.kind == Kind.FLUID)[:, None]
+        return jnp.where(fluid, self.scale * out, 0.0), neighbors
+
+
+def _graph(problem: Problem) -> RadiusGraph:
+    model = problem.coarse.model
+    domain = model.domain
+    bounds = tuple(zip(domain.lower, domain.upper, strict=True))
+    return RadiusGraph(bounds, tuple(domain.periodic), float(model.cutoff), 2.0)
+
+
+def _wrap(x, case: Case):
+    domain = case.model.domain
+    lo = jnp.asarray(domain.lower, x.dtype)
+    size = jnp.asarray(domain.size, x.dtype)
+    return jnp.where(jnp.asarray(domain.periodic), lo + jnp.mod(x - lo, size), x)
+
+
+def step(problem: Problem, net, mode: str, state: State, params: Params, graph, neighbors):
+    """One coarse step: the solver then the correction (``mode="correction"``), the solver
+    alone (``net=None``), or the network alone (``mode="gns"``)."""
+    case = problem.coarse
+    if mode == "gns":
+        dv, neighbors = net(state, graph, neighbors, problem.speed)
+        v = state.velocity + dv
+        x = _wrap(state.position + problem.dt * v, case)
+        return state.replace(position=x, velocity=v), neighbors
+    state = simulate(case, params, n_steps=1, dt=problem.dt, state=state).final
+    if net is not None:
+        dv, neighbors = net(state, graph, neighbors, problem.speed)
+        state = state.replace(velocity=state.velocity + dv)
+    return state, neighbors
+
+
+def rollout(
+    problem: Problem, net, mode: str, state: State, params: Params, n_steps: int, neighbors
+):
+    """``n_steps`` coarse steps from ``state``: ``(states [n_steps], probe fields
+    [n_steps, P, d], overflow)``."""
+    graph = _graph(problem)
+    probes = jnp.asarray(problem.probes, state.position.dtype)
+
+    def body(carry, _):
+        s, nbrs, over = carry
+        s, nbrs = step(problem, net, mode, s, params, graph, nbrs)
+        u = probe_velocity(s, problem.coarse, probes)
+        return (s, nbrs, over | overflowed(nbrs)), (s, u)
+
+    (_, _, over), (states, fields) = jax.lax.scan(
+        body, (state, neighbors, jnp.asarray(False)), None, length=n_steps
+    )
+    return states, fields, over
+
+
+def allocate(problem: Problem):
+    """The correction network's neighbour list for the coarse initial state."""
+    return _graph(problem).allocate(problem.coarse.state.position)
+
+
+def errors(
+    problem: Problem, net, mode: str = "correction", n_steps: int | None = None
+) -> np.ndarray:
+    """Relative probe-velocity error ``[n_conditions, n_steps + 1]`` at coarse steps
+    0..n (step 0: the two initial states, the floor set by the particle sampling)."""
+    n_steps = problem.horizon if n_steps is None else int(n_steps)
+    if not 1 <= n_steps <= problem.horizon:
+        raise ValueError(
+            f"n_steps must lie in 1..{problem.horizon} (the reference horizon), got {n_steps}"
+        )
+    neighbors = allocate(problem)
+    run = eqx.filter_jit(
+        lambda net, params: rollout(
+            problem, net, mode, problem.coarse.state, params, n_steps, neighbors
+        )
+    )
+    out = []
+    for k, (pc, _) in enumerate(problem.conditions):
+        _, fields, over = run(net, pc)
+        if bool(over):
+            raise RuntimeError("the correction's neighbour list overflowed; raise its capacity")
+        u0 = probe_velocity(problem.coarse.state, problem.coarse, problem.probes)
+        fields = jnp.concatenate([u0[None], fields])
+        ref = jnp.asarray(problem.reference[k, : n_steps + 1])
+        out.append(np.asarray(relative_error(fields, ref)))
+    return np.stack(out)
+
+
+@dataclasses.dataclass
+class TrainResult:
+    net: object
+    losses: list
+    seconds: float
+    iterations: int
+
+
+def train(
+    problem: Problem,
+    net,
+    *,
+    mode: str = "correction",
+    unroll: int = 10,
+    iterations: int | None = None,
+    seconds: float | None = None,
+    lr: float = 1e-3,
+    clip: float = 1.0,
+    refresh_every: int = 25,
+    seed: int = 0,
+    log=print,
+) -> TrainResult:
+    """Train ``net`` by back-propagating through ``unroll`` coarse steps (solver included).
+
+    Each iteration draws a condition and a start step ``s`` (a multiple of ``unroll``);
+    the start state is the model's own rollout at ``s`` (refreshed every
+    ``refresh_every`` iterations, no gradient through it), the loss the mean over the
+    ``unroll`` steps of the squared relative probe-velocity error against the fine
+    reference.  Adam with gradients clipped to global norm ``clip``.  Budget:
+    ``iterations`` and/or wall-clock ``seconds`` (after compiling).
+    """
+    if iterations is None and seconds is None:
+        raise ValueError("give iterations or seconds (the training budget)")
+    if not 1 <= unroll <= problem.horizon:
+        raise ValueError(
+            f"unroll must lie in 1..{problem.horizon} (the reference horizon), got {unroll}"
+        )
+    neighbors = allocate(problem)
+    n_starts = problem.horizon // unroll
+    reference = jnp.asarray(problem.reference)
+
+    def loss_fn(net, state, params, ref):
+        _, fields, over = rollout(problem, net, mode, state, params, unroll, neighbors)
+        return jnp.mean(relative_error(fields, ref) ** 2), over
+
+    # clipped gradients: an unrolled solver has occasional large gradients
+    optimizer = optax.chain(optax.clip_by_global_norm(clip), optax.adam(lr))
+    opt_state = optimizer.init(eqx.filter(net, eqx.is_array))
+
+    @eqx.filter_jit
+    def update(net, opt_state, state, params, ref):
+        (loss, over), grads = eqx.filter_value_and_grad(loss_fn, has_aux=True)(
+            net, state, params, ref
+        )
+        updates, opt_state = optimizer.update(grads, opt_state, eqx.filter(net, eqx.is_array))
+        return eqx.apply_updates(net, updates), opt_state, loss, over
+
+    @eqx.filter_jit
+    def starts_of(net, params):
+        states, _, _ = rollout(
+            problem, net, mode, problem.coarse.state, params, n_starts * unroll, neighbors
+        )
+        return states
+
+    def refresh(net):
+        out = []
+        for pc, _ in problem.conditions:
+            states = starts_of(net, pc)  # after steps 1..n; prepend the initial state
+            first = jax.tree_util.tree_map(lambda a: a[None], problem.coarse.state)
+            allst = jax.tree_util.tree_map(lambda a, b: jnp.concatenate([a, b]), first, states)
+            out.append(jax.tree_util.tree_map(lambda a: a[0 : n_starts * unroll : unroll], allst))
+        return out
+
+    rng = np.random.default_rng(seed)
+    starts = refresh(net)
+    losses = []
+    t0 = time.perf_counter()
+    k = 0
+    while True:
+        elapsed = time.perf_counter() - t0
+        if (iterations is not None and k >= iterations) or (
+            seconds is not None and elapsed >= seconds
+        ):
+            break
+        c = int(rng.integers(len(problem.conditions)))
+        j = int(rng.integers(n_starts))
+        state = jax.tree_util.tree_map(lambda a, j=j: a[j], starts[c])
+        ref = reference[c, j * unroll + 1 : (j + 1) * unroll + 1]
+        net, opt_state, loss, over = update(net, opt_state, state, problem.conditions[c][0], ref)
+        if bool(over):
+            raise RuntimeError("the correction's neighbour list overflowed; raise its capacity")
+        losses.append(float(loss))
+        k += 1
+        if k == 1:
+            t0 = time.perf_counter()  # the budget starts after compilation
+        if k % refresh_every == 0:
+            starts = refresh(net)
+            mean = np.mean(losses[-refresh_every:])
+            log(f"iteration {k:5d}  t={time.perf_counter() - t0:7.1f}s  loss {mean:.4e}")
+    return TrainResult(net, losses, time.perf_counter() - t0, k)
