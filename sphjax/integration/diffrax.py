@@ -10,8 +10,8 @@ diffrax integrates ``dy/dt = f(t, y, args)``.  Here
 * the term :class:`SPHTerm` evaluates :func:`sphjax.evaluate` (eqs. 5, 10-12, 14-19) at
   ``y``, with neighbour lists rebuilt at ``y``.  Its vector field returns :class:`Rates`
   (velocity, acceleration, density rate and the evaluated density — summation density
-  and wall extrapolation are algebraic, not integrated); ``prod(rates, dt)`` turns them into an increment of ``y``, so any
-  explicit diffrax solver can integrate it too.
+  and wall extrapolation are algebraic, not integrated); ``prod(rates, dt)`` turns them
+  into an increment of ``y``, so any explicit diffrax solver can integrate it too.
 
 Neighbours inside the vector field: the fluid list is rebuilt at the current positions
 with the fixed capacity of the template (jax-md cell list, no Verlet skin); a list that
