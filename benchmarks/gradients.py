@@ -8,9 +8,11 @@ For a Taylor-Green vortex of ``n_side**2`` particles (float32 by default) this m
   without ``checkpoint_every``;
 * with ``--forward-mode``, the same derivative in forward mode (``jax.jacfwd``: one
   tangent through the scan, nothing stored), the cheaper route for a few parameters;
-* with ``--autodiff-steps``, reverse mode with JAX's own adjoint of the fluid rates
-  (``Model.pair_adjoint=False``) instead of the hand-derived one
-  (:mod:`sphjax.fluid.adjoint`), for comparison.
+* with ``--autodiff-steps``, reverse mode with JAX's own transpose of the pair sums
+  (``Model.pair_adjoint=False``) instead of their custom adjoint
+  (:mod:`sphjax.physics.pairs`), for comparison;
+* with ``--case dam_break``, the dam break (walls, continuity density, Monaghan viscosity,
+  delta-SPH; ``n`` particles across the column), derivative w.r.t. ``artificial_alpha``.
 
 Each configuration runs in its own subprocess, so the peak RSS belongs to it alone.
 
@@ -34,9 +36,21 @@ import subprocess
 import sys
 import time
 
+#: case -> (factory, the Params field differentiated)
+CASES = {
+    "taylor_green": ("taylor_green", "kinematic_viscosity"),
+    "dam_break": ("dam_break", "artificial_alpha"),
+}
+
 
 def run_one(
-    n_side: int, n_steps: int, checkpoint: int, repeat: int, x64: bool, mode: str = "reverse"
+    n_side: int,
+    n_steps: int,
+    checkpoint: int,
+    repeat: int,
+    x64: bool,
+    mode: str = "reverse",
+    case_name: str = "taylor_green",
 ) -> dict:
     """One configuration in this process: forward, then the gradient (``mode``)."""
     import jax
@@ -45,22 +59,29 @@ def run_one(
     jax.config.update("jax_enable_x64", x64)
     import sphjax
 
-    case = sphjax.cases.taylor_green(n=n_side)
+    factory, field = CASES[case_name]
+    case = sphjax.cases.get(factory, n=n_side)
     if mode == "autodiff":
         # reverse mode with JAX's own adjoint of the fluid rates instead of the hand one
         case = case.replace(model=case.model.replace(pair_adjoint=False))
     checkpoint_every = checkpoint or None
 
-    def loss(nu):
-        params = case.params.replace(kinematic_viscosity=nu)
+    def loss(value):
+        params = case.params.replace(**{field: value})
         final = sphjax.simulate(
             case, params, n_steps=n_steps, checkpoint_every=checkpoint_every
         ).final
         return 0.5 * jnp.sum(final.mass[:, None] * final.velocity**2)
 
-    nu = jnp.asarray(case.params.kinematic_viscosity)
+    nu = jnp.asarray(getattr(case.params, field))
     derivative = jax.jacfwd(loss) if mode == "forward" else jax.grad(loss)
-    out = dict(particles=case.n_particles, n_steps=n_steps, checkpoint_every=checkpoint, mode=mode)
+    out = dict(
+        case=case_name,
+        particles=case.n_particles,
+        n_steps=n_steps,
+        checkpoint_every=checkpoint,
+        mode=mode,
+    )
     for name, fn in (("forward", loss), ("grad", derivative)):
         t0 = time.perf_counter()
         compiled = jax.jit(fn).lower(nu).compile()
@@ -94,7 +115,10 @@ def _configurations(args):
 
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--n-side", type=int, default=100, help="particles per side")
+    parser.add_argument("--case", choices=tuple(CASES), default="taylor_green")
+    parser.add_argument(
+        "--n-side", type=int, default=100, help="the case's n (Taylor-Green: per side)"
+    )
     parser.add_argument("--steps", type=int, nargs="+", default=[1000, 4000])
     parser.add_argument(
         "--steps-no-checkpoint",
@@ -131,27 +155,30 @@ def main(argv=None):
     args = parser.parse_args(argv)
 
     if args.one:
-        result = run_one(*args.one, repeat=args.repeat, x64=args.x64, mode=args.mode)
+        result = run_one(
+            *args.one, repeat=args.repeat, x64=args.x64, mode=args.mode, case_name=args.case
+        )
         print(json.dumps(result), flush=True)
         return
 
     header = (
-        f"{'particles':>9} {'steps':>6} {'mode':>8} {'ckpt':>5} {'fwd s':>8} {'grad s':>8} "
-        f"{'grad/fwd':>8} {'peak RSS MB':>11}"
+        f"{'case':>12} {'steps':>6} {'mode':>8} {'ckpt':>5} {'particles':>9} {'fwd s':>8} "
+        f"{'grad s':>8} {'grad/fwd':>8} {'peak RSS MB':>11}"
     )
     print(header, flush=True)
     for mode, n_steps, checkpoint in _configurations(args):
         cmd = [sys.executable, __file__, "--one", str(args.n_side), str(n_steps), str(checkpoint)]
-        cmd += ["--repeat", str(args.repeat), "--mode", mode] + (["--x64"] if args.x64 else [])
+        cmd += ["--repeat", str(args.repeat), "--mode", mode, "--case", args.case]
+        cmd += ["--x64"] if args.x64 else []
         proc = subprocess.run(cmd, capture_output=True, text=True, env=os.environ.copy())
-        label = f"{args.n_side**2:>9} {n_steps:>6} {mode:>8} {checkpoint or '-':>5}"
+        label = f"{args.case:>12} {n_steps:>6} {mode:>8} {checkpoint or '-':>5}"
         if proc.returncode != 0:
             tail = proc.stderr.strip().splitlines()[-1:] or ["?"]
             print(f"{label}  failed (exit {proc.returncode}): {tail[0]}", flush=True)
             continue
         r = json.loads(proc.stdout.strip().splitlines()[-1])
         print(
-            f"{label} {r['forward_s']:>8.2f} {r['grad_s']:>8.2f} {r['ratio']:>8.2f} "
+            f"{label} {r['particles']:>9} {r['forward_s']:>8.2f} {r['grad_s']:>8.2f} {r['ratio']:>8.2f} "
             f"{r['peak_rss_mb']:>11.0f}",
             flush=True,
         )

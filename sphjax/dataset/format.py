@@ -21,6 +21,9 @@ import numpy as np
 from sphjax.core.case import Case
 from sphjax.core.space import minimum_image
 from sphjax.core.state import Kind
+from sphjax.physics.fluid.density import ContinuityDensity
+from sphjax.physics.fluid.system import FluidSystem
+from sphjax.physics.solid.system import SolidSystem
 
 FORMAT_VERSION = 2
 
@@ -34,7 +37,9 @@ def particle_types(case: Case) -> np.ndarray:
     out = np.full(kind.shape, FLUID, np.int32)
     out[kind == Kind.WALL] = WALL
     out[kind == Kind.SOLID] = BODY
-    out[kind == Kind.CLAMPED] = MOVING_WALL if case.model.clamped_motion is not None else WALL
+    solid = case.model.system(SolidSystem)
+    moving = solid is not None and solid.clamped_motion is not None
+    out[kind == Kind.CLAMPED] = MOVING_WALL if moving else WALL
     return out
 
 
@@ -72,6 +77,9 @@ def statistics(positions, types, bounds, periodic) -> dict:
 def metadata(case: Case, plan: dict, bounds, periodic, types, stats) -> dict:
     """The LagrangeBench metadata keys plus the sphjax settings."""
     params, model = case.params, case.model
+    fluid = model.system(FluidSystem)
+    if fluid is None:
+        raise ValueError(f"case {case.name!r} has no fluid; datasets are of fluid flows")
     dx = float(case.info.get("dx", model.smoothing_length))
     frames = plan["steps"] // plan["write_every"] + 1
     gravity = np.asarray(params.gravity)
@@ -99,12 +107,12 @@ def metadata(case: Case, plan: dict, bounds, periodic, types, stats) -> dict:
         artificial_alpha=float(params.artificial_alpha),
         g_ext_magnitude=float(np.linalg.norm(gravity)),
         p_bg_factor=float(params.background_pressure) / (rho0 * sound**2),
-        density_evolution=model.density == "continuity",
+        density_evolution=isinstance(fluid.density, ContinuityDensity),
         reference_density=rho0,
         sound_speed=sound,
         smoothing_length=float(model.smoothing_length),
         kernel=type(model.kernel).__name__,
-        gamma=float(model.gamma),
+        gamma=float(getattr(fluid.equation_of_state, "gamma", 1.0)),
         varied_params=plan["vary"],
         perturbation=plan["perturbation"],
         seed=plan["seed"],

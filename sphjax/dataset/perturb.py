@@ -20,7 +20,8 @@ import numpy as np
 
 from sphjax import cases as cases_module
 from sphjax.core.case import Case
-from sphjax.core.state import Kind, Params, State
+from sphjax.core.params import Params
+from sphjax.core.state import Kind, State
 
 SPLITS = ("train", "valid", "test")
 

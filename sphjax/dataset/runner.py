@@ -13,7 +13,8 @@ import jax.numpy as jnp
 import numpy as np
 
 from sphjax.core.case import Case
-from sphjax.core.state import Params, State
+from sphjax.core.params import Params
+from sphjax.core.state import State
 from sphjax.integration.simulate import simulate
 
 

@@ -19,8 +19,9 @@ import jax
 import jax.numpy as jnp
 
 from sphjax.core.kernels import WendlandC2
+from sphjax.core.model import Domain, Model
 from sphjax.core.neighbors import NeighborSearch
-from sphjax.core.state import Domain, Kind, Model
+from sphjax.physics.fluid.system import FluidSystem
 
 
 @dataclasses.dataclass(frozen=True)
@@ -45,7 +46,7 @@ class RadiusGraph:
                 tuple(float(hi) for _, hi in self.bounds),
                 tuple(bool(p) for p in self.periodic),
             ),
-            particle_kinds=(Kind.FLUID,),
+            systems=(FluidSystem(),),
             neighbor_capacity=float(self.capacity_multiplier),
         )
 

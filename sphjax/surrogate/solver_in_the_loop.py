@@ -38,8 +38,9 @@ import optax
 
 from sphjax import kernels
 from sphjax.core.case import Case
+from sphjax.core.params import Params
 from sphjax.core.space import minimum_image
-from sphjax.core.state import Kind, Params, State
+from sphjax.core.state import Kind, State
 from sphjax.integration.simulate import simulate
 from sphjax.surrogate.gns import GNS
 from sphjax.surrogate.graph import RadiusGraph, overflowed
