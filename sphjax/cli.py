@@ -433,7 +433,7 @@ def cmd_cases(args) -> int:
 
     import numpy as np
 
-    from sphjax._cli_run import PARAMS_FIELDS, build_case
+    from sphjax._cli_run import build_case
 
     case = build_case(args.name, {})
     factory = CASES[args.name]
@@ -442,8 +442,8 @@ def cmd_cases(args) -> int:
     for key, parameter in inspect.signature(factory).parameters.items():
         print(f"  {key} = {parameter.default!r}")
     print("parameters (--set FIELD=VALUE), as the case sets them:")
-    for name in PARAMS_FIELDS:
-        value = np.asarray(getattr(case.params, name))
+    for name, value in case.params.items():
+        value = np.asarray(value)
         shown = ",".join(f"{v:g}" for v in value.ravel()) if value.ndim else f"{float(value):g}"
         print(f"  {name} = {shown}")
     return EXIT_OK

@@ -186,7 +186,11 @@ BAD_INPUT = [
     ([*RUN, "--save-every", "2", "--save-dt", "0.1"], "not allowed with argument", None),
     ([*RUN, "--save-dt", "-1"], "argument --save-dt: must be a positive number", None),
     ([*RUN, "--dt", "0.001", "--save-dt", "0.0015"], "--save-dt: 0.0015 is not a whole", None),
-    ([*RUN, "--set", "nope=1"], "--set: 'nope' is not a parameter; choose one of", None),
+    (
+        [*RUN, "--set", "nope=1"],
+        "--set: 'nope' is not a parameter of this case; choose one of",
+        None,
+    ),
     ([*RUN, "--set", "sound_speed=abc"], "sound_speed=abc: the value must be a number", None),
     ([*RUN, "--set", "sound_speed"], "argument --set: must look like FIELD=VALUE", None),
     ([*RUN, "--set", "sound_speed=inf"], "sound_speed=inf: the value must be finite", None),

@@ -280,4 +280,5 @@ def test_dataset_command_reports_throughput_and_names_bad_input(tmp_path, capsys
     assert "trajectories per minute" in capsys.readouterr().out
     assert main(argv) == 2  # the folder is not empty: one line, no traceback
     err = capsys.readouterr().err
-    assert "not empty" in err and "Traceback" not in err and len(err.strip().splitlines()) == 1
+    assert "holds files" in err and "--overwrite" in err and "Traceback" not in err
+    assert len(err.strip().splitlines()) == 1

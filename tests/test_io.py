@@ -67,7 +67,13 @@ def test_metadata(run, case):
     assert_same_tree(meta["params"], case.params)
     model = meta["model"]
     assert model["kernel"] == "quintic_spline"
-    assert model["domain"] == {"lower": [0.0, 0.0], "upper": [1.0, 1.0], "periodic": [True, True]}
+    assert model["domain"] == {
+        "type": "Domain",
+        "lower": [0.0, 0.0],
+        "upper": [1.0, 1.0],
+        "periodic": [True, True],
+    }
+    assert [system["type"] for system in model["systems"]] == ["FluidSystem"]
     assert model["smoothing_length"] == case.model.smoothing_length
     assert set(model) == {f.name for f in dataclasses.fields(sphjax.Model)}
     assert meta["case_info"]["n"] == 8

@@ -15,6 +15,7 @@ metrics rely on: the frame time, box, dimension and periodic axes of a dataset.
 from __future__ import annotations
 
 import math
+from types import SimpleNamespace
 
 import numpy as np
 
@@ -74,17 +75,26 @@ def statistics(positions, types, bounds, periodic) -> dict:
     )
 
 
+_NO_FLUID = SimpleNamespace(
+    sound_speed=math.nan,
+    reference_density=math.nan,
+    kinematic_viscosity=math.nan,
+    artificial_alpha=math.nan,
+    background_pressure=math.nan,
+)
+
+
 def metadata(case: Case, plan: dict, bounds, periodic, types, stats) -> dict:
     """The LagrangeBench metadata keys plus the sphjax settings."""
     params, model = case.params, case.model
     fluid = model.system(FluidSystem)
-    if fluid is None:
-        raise ValueError(f"case {case.name!r} has no fluid; datasets are of fluid flows")
+    # a case without a fluid (an elastic solid) has no fluid parameters: NaN for those keys
+    values = params.fluid if params.fluid is not None else _NO_FLUID
     dx = float(case.info.get("dx", model.smoothing_length))
     frames = plan["steps"] // plan["write_every"] + 1
     gravity = np.asarray(params.gravity)
-    sound = float(params.sound_speed)
-    rho0 = float(params.reference_density)
+    sound = float(values.sound_speed)
+    rho0 = float(values.reference_density)
     return dict(
         case=case.name,
         solver="sphjax WCSPH, kick-drift-kick",
@@ -103,16 +113,16 @@ def metadata(case: Case, plan: dict, bounds, periodic, types, stats) -> dict:
         bounds=bounds,
         default_connectivity_radius=1.45 * dx,
         **stats,
-        viscosity=float(params.kinematic_viscosity),
-        artificial_alpha=float(params.artificial_alpha),
+        viscosity=float(values.kinematic_viscosity),
+        artificial_alpha=float(values.artificial_alpha),
         g_ext_magnitude=float(np.linalg.norm(gravity)),
-        p_bg_factor=float(params.background_pressure) / (rho0 * sound**2),
-        density_evolution=isinstance(fluid.density, ContinuityDensity),
+        p_bg_factor=float(values.background_pressure) / (rho0 * sound**2),
+        density_evolution=fluid is not None and isinstance(fluid.density, ContinuityDensity),
         reference_density=rho0,
         sound_speed=sound,
         smoothing_length=float(model.smoothing_length),
         kernel=type(model.kernel).__name__,
-        gamma=float(getattr(fluid.equation_of_state, "gamma", 1.0)),
+        gamma=float(getattr(getattr(fluid, "equation_of_state", None), "gamma", 1.0)),
         varied_params=plan["vary"],
         perturbation=plan["perturbation"],
         seed=plan["seed"],

@@ -182,8 +182,7 @@ def sample_params(
 
 def check_vary(params: Params, vary: Mapping[str, tuple[float, float]]) -> dict:
     """Validate ``vary``: scalar Params fields with ``lo <= hi``."""
-    names = [f.name for f in dataclasses.fields(params)]
-    scalar = [n for n in names if np.ndim(getattr(params, n)) == 0]
+    scalar = [name for name, value in params.items() if np.ndim(value) == 0]
     out = {}
     for name, rng in vary.items():
         if name not in scalar:
