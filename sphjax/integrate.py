@@ -303,7 +303,8 @@ def simulate(
       save_every: steps between saved frames (default: only the last frame);
         ``n_steps`` must be a multiple of it.
       dt: time step (default ``case.dt``); rejected above the stability limit.
-      state: initial state (default ``case.state``).
+      state: initial state (default ``case.state_for(params)``, i.e. ``case.state`` unless
+        the parameters differ from ``case.params`` and the case derives its state from them).
       checkpoint_every: in reverse mode every step is rematerialised (only its input
         carry is stored, about ``N * (4 d + 6 + K)`` numbers); with ``checkpoint_every``
         the steps are also grouped in chunks of this many and only each chunk's first
@@ -316,7 +317,7 @@ def simulate(
       :class:`Trajectory` with ``n_steps // save_every + 1`` frames.
     """
     params = case.params if params is None else params
-    state = case.state if state is None else state
+    state = case.state_for(params) if state is None else state
     model = case.model
     dt = case.dt if dt is None else dt
     if n_steps is None:

@@ -23,6 +23,8 @@ from sphjax.cases.solid import (
     oscillating_plate,
     oscillation_stats,
     plate_mode_shape,
+    plate_reference,
+    plate_sound_speed,
     tip_displacement,
     turek_hron_csm,
 )
@@ -78,4 +80,6 @@ __all__ = [
     "tip_displacement",
     "oscillation_stats",
     "plate_mode_shape",
+    "plate_reference",
+    "plate_sound_speed",
 ]

@@ -15,9 +15,18 @@ from sphjax.state import Domain, Kind, Model, make_params, make_state
 from sphjax.timestep import stable_time_step
 
 
-def _finish(name, state, model, params, t_end, info, dt=None):
+def _finish(name, state, model, params, t_end, info, dt=None, initial_state=None):
     dt = stable_time_step(state, model, params) if dt is None else dt
-    return Case(name=name, state=state, model=model, params=params, dt=dt, t_end=t_end, info=info)
+    return Case(
+        name=name,
+        state=state,
+        model=model,
+        params=params,
+        dt=dt,
+        t_end=t_end,
+        info=info,
+        initial_state=initial_state,
+    )
 
 
 def taylor_green(
@@ -223,9 +232,16 @@ def _tank(
     kind = np.concatenate([np.full(len(fluid), Kind.FLUID), np.full(len(walls), Kind.WALL)])
     # hydrostatic initial density so the column starts near equilibrium (eq. 12 inverted)
     gamma = model_kw.get("gamma", 7.0)
-    depth = np.where(kind == Kind.FLUID, fluid_height - x[:, 1], 0.0)
-    rho = np.asarray(tait_density(jnp.asarray(rho0 * g * depth), rho0, c0, gamma))
+    depth = jnp.asarray(np.where(kind == Kind.FLUID, fluid_height - x[:, 1], 0.0))
     params = make_params(2, reference_density=rho0, sound_speed=c0, gravity=(0.0, -g), **params_kw)
+
+    def initial_state(p):
+        """Density ``rho(p = rho0 g (H - y))`` and mass ``rho0 dx^2`` from ``p`` (eq. 12)."""
+        rho0_p = p.reference_density
+        pressure = rho0_p * (-p.gravity[-1]) * depth
+        rho = tait_density(pressure, rho0_p, p.sound_speed, gamma)
+        return make_state(x, 0.0, rho, rho0_p * dx**2, kind)
+
     margin = (layers + 2) * dx
     model = Model(
         dim=2,
@@ -237,8 +253,9 @@ def _tank(
         particle_kinds=(Kind.FLUID, Kind.WALL),
         **model_kw,
     )
-    state = make_state(x, 0.0, rho, rho0 * dx**2, kind)
-    return _finish(name, state, model, params, t_end, info)
+    return _finish(
+        name, initial_state(params), model, params, t_end, info, initial_state=initial_state
+    )
 
 
 def hydrostatic_tank(
