@@ -18,6 +18,7 @@ from sphjax.cases.fluid import (
     poiseuille_startup_speed,
     surge_front,
     taylor_green,
+    taylor_green_velocity,
 )
 from sphjax.cases.solid import (
     oscillating_plate,
@@ -69,6 +70,7 @@ __all__ = [
     "CASES",
     "get",
     "taylor_green",
+    "taylor_green_velocity",
     "poiseuille",
     "poiseuille_startup_speed",
     "poiseuille_centreline_speed",
