@@ -157,6 +157,23 @@ def taylor_green_table(results):
             f"{r['ke_error']:+.2%} | {r['ke_rise']:+.2%} | {r['velocity_error_first']:.2%} | "
             f"{r['velocity_error_max']:.2%} | {r['start_seconds']:.0f} | {r['seconds']:.0f} |"
         )
+    lines += [
+        "",
+        "n = 100 (10 000 particles, 3 670 steps; the same start and parameters, float32, run",
+        "separately on the loaded development machine, not by this script's default set):",
+        "",
+        "| Re | n | KE error at t=1 | KE rise | velocity error t=0.05 | max velocity error |",
+        "|---|---|---|---|---|---|",
+        "| 100 | 100 | -1.30% | -1.68% | 0.71% | 2.06% (t = 1; below 2 % up to t = 0.9) |",
+        "| 1000 | 100 | -2.49% | -0.77% | 0.97% | 3.61% |",
+        "",
+        "So at n = 100 the start meets the issue's targets for Re = 100 (KE within 2 % at t = 1,",
+        "KE never rising, velocity within 2 % at the first frame and, but for the last frame,",
+        "throughout); at Re = 1000 it does not (KE -2.5 %, velocity error 3.6 %): the particle",
+        "noise that the disorder leaves is damped less at high Re.  The velocity error jumps",
+        "at t ~ 0.15 in every run, when the shear of the vortices rearranges the disordered",
+        "particles; at n <= 50 it then stays near 3.5 %.",
+    ]
     return lines
 
 
@@ -295,9 +312,10 @@ def main():
     )
     parser.add_argument(
         "--cases",
-        nargs="+",
+        nargs="*",
         default=["taylor_green", "poiseuille", "hydrostatic_tank", "dam_break"],
-        help="cases to rerun; the others keep their rows from docs/figures/validation_fluid.json",
+        help="cases to rerun (none: only rewrite the page); the others keep their rows "
+        "from docs/figures/validation_fluid.json",
     )
     args = parser.parse_args()
     (DOCS / "img").mkdir(exist_ok=True)
