@@ -6,11 +6,13 @@
       a_a = -(n_mean / 2) sum_b (1 / n_a^2 + 1 / n_b^2) grad_a W_ab,   n_a = sum_b W_ab,
 
   i.e. the gradient of the total particle volume ``sum_a 1 / n_a``, which is largest for
-  a uniform number density.  The pseudo-time steps are damped (heavy ball):
-  ``d <- momentum d + step h^2 a``, ``x <- x + d``.  Started from a strongly disordered
-  lattice and stopped after a finite number of steps, it leaves an isotropic, disordered
-  distribution whose number density is uniform to a fraction of a percent: the relaxed
-  start of Adami et al. (2013) for the Taylor-Green vortex.
+  a uniform number density.  The pseudo-time steps are ``d <- momentum d + step h^2 a``,
+  ``x <- x + d`` (steepest ascent by default, ``momentum = 0``; a heavy ball otherwise).
+  Started from a strongly disordered lattice and stopped after a finite number of steps,
+  it leaves an isotropic, disordered distribution whose number density is uniform to
+  about half a percent: the relaxed start of Adami et al. (2013) for the Taylor-Green
+  vortex.  Relaxed much further (with momentum, say) the particles return towards the
+  lattice, which the vortices then break up (docs/design.md).
 * :func:`summation_masses` solves ``sum_b m_b W_ab = rho_a`` (eq. 5, self term included)
   for the masses by conjugate gradients (the matrix ``W_ab`` is symmetric positive
   definite for the spline and Wendland kernels), so that summation density reproduces
@@ -90,8 +92,8 @@ def relax_periodic(
     kernel,
     h: float,
     iterations: int,
-    step: float = 0.3,
-    momentum: float = 0.8,
+    step: float = 0.1,
+    momentum: float = 0.0,
     rebuild_every: int = 50,
 ):
     """Relax positions ``x`` (``[N, d]``) in the periodic box ``[0, box)^d``.
