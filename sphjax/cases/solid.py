@@ -296,8 +296,9 @@ def turek_hron_csm(
       fill_root: with ``clamp="cylinder"``, make the lattice sites of the beam's band
         between the cylinder's surface and ``x = 0.25`` free beam particles (default).
         ``False`` leaves them out (the set-up of earlier versions), which notches the
-        root's outer fibres at some resolutions (12 and 16 particles across) and makes
-        the beam about 10 % too soft there (docs/validation_solid.md).
+        root's outer fibres at some resolutions (one site per edge at 12 particles
+        across, two at 16) and adds 2.6 % and 6 % of the CSM3 mean deflection there
+        (docs/validation_solid.md).
     """
     n = check_resolution("n", n, 2)
     E = check_positive("young_modulus", young_modulus)
