@@ -122,3 +122,9 @@ def test_transport_velocity_run_follows_sound_speed():
     a = sphjax.simulate(case, params, n_steps=10, dt=dt).final
     b = sphjax.simulate(built, n_steps=10, dt=dt).final
     np.testing.assert_allclose(a.position, b.position, rtol=1e-10, atol=1e-13)
+
+
+@pytest.mark.parametrize("bad", [-1, 2.5, "many"])
+def test_bad_relax_iterations_is_named(bad):
+    with pytest.raises(ValueError, match="relax_iterations must be a whole number"):
+        sphjax.cases.taylor_green(n=8, relax_iterations=bad)

@@ -86,7 +86,11 @@ def taylor_green(
     check_positive("speed", speed)
     if not 0.0 <= disorder < 0.5:
         raise ValueError(f"disorder must lie in [0, 0.5) (units of dx), got {disorder}")
-    if int(relax_iterations) != relax_iterations or relax_iterations < 0:
+    try:
+        whole = int(relax_iterations) == relax_iterations and relax_iterations >= 0
+    except (TypeError, ValueError, OverflowError):
+        whole = False
+    if not whole:
         raise ValueError(
             f"relax_iterations must be a whole number >= 0 (0: no packing), "
             f"got {relax_iterations!r}"
