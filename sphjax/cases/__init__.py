@@ -18,11 +18,14 @@ from sphjax.cases.fluid import (
     poiseuille_startup_speed,
     surge_front,
     taylor_green,
+    taylor_green_velocity,
 )
 from sphjax.cases.solid import (
     oscillating_plate,
     oscillation_stats,
     plate_mode_shape,
+    plate_reference,
+    plate_sound_speed,
     tip_displacement,
     turek_hron_csm,
 )
@@ -67,6 +70,7 @@ __all__ = [
     "CASES",
     "get",
     "taylor_green",
+    "taylor_green_velocity",
     "poiseuille",
     "poiseuille_startup_speed",
     "poiseuille_centreline_speed",
@@ -78,4 +82,6 @@ __all__ = [
     "tip_displacement",
     "oscillation_stats",
     "plate_mode_shape",
+    "plate_reference",
+    "plate_sound_speed",
 ]

@@ -8,6 +8,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from sphjax.cases._geometry import box_walls, check_positive, check_resolution, lattice, wall_layers
+from sphjax.cases._packing import periodic_neighbours, relax_periodic, summation_masses
 from sphjax.cases._systems import fluid_system, wall_system
 from sphjax.core.case import Case
 from sphjax.core.kernels import QuinticSpline, WendlandC2, as_kernel
@@ -18,9 +19,18 @@ from sphjax.integration.timestep import stable_time_step
 from sphjax.physics.fluid.eos import tait_density
 
 
-def _finish(name, state, model, params, t_end, info, dt=None):
+def _finish(name, state, model, params, t_end, info, dt=None, initial_state=None):
     dt = stable_time_step(state, model, params) if dt is None else dt
-    return Case(name=name, state=state, model=model, params=params, dt=dt, t_end=t_end, info=info)
+    return Case(
+        name=name,
+        state=state,
+        model=model,
+        params=params,
+        dt=dt,
+        t_end=t_end,
+        info=info,
+        initial_state=initial_state,
+    )
 
 
 def taylor_green(
@@ -37,39 +47,67 @@ def taylor_green(
     transport_velocity: bool = True,
     transport_pressure_factor: float = 1.0,
     gamma: float = 1.0,
-    disorder: float = 0.3,
+    disorder: float = 0.45,
     seed: int = 0,
+    relax_iterations: int = 1000,
     t_end: float = 1.0,
 ) -> Case:
     """2D periodic Taylor-Green vortex on ``[0, 1]^2`` (Taylor & Green 1937).
 
     ``u = -U cos(2 pi x) sin(2 pi y)``, ``v = U sin(2 pi x) cos(2 pi y)``,
-    ``p = -(U^2 / 4)(cos 4 pi x + cos 4 pi y)``, ``nu = U / Re``, ``c0 = 10 U``.
+    ``p = -(rho0 U^2 / 4)(cos 4 pi x + cos 4 pi y)``, ``nu = U / Re``, ``c0 = 10 U``.
     Kinetic energy decays as ``exp(-16 pi^2 nu t)``.
 
     Defaults: quintic spline with ``h = 1.2 dx``, summation density, linear equation of
-    state, the transport-velocity
-    formulation (Adami et al. 2013, ``p_b = rho0 c0^2``) and particles displaced from the
-    square lattice by up to ``disorder * dx`` (seeded).  On a perfect lattice the
-    hyperbolic stagnation points squeeze the particle rows into lines after
-    ``t ~ 0.1`` and the flow collapses (in JAX-SPH 0.1.0 too); a disordered start, as
-    the relaxed initial conditions of Adami et al., avoids it (docs/design.md).
+    state, the transport-velocity formulation (Adami et al. 2013, ``p_b = rho0 c0^2``).
+
+    The start is the relaxed one of Adami et al. (2013): the square lattice displaced by
+    up to ``disorder * dx`` (seeded), relaxed for ``relax_iterations`` pseudo-time steps
+    under a uniform background pressure (:mod:`sphjax.cases._packing`), then given the
+    analytic velocity at the relaxed positions, the density of the analytic pressure
+    through the equation of state, and masses for which summation density (eq. 5) equals
+    that density at every particle.  So the pressure is the analytic one from step 0 and
+    no compression energy is stored.  A perfect lattice (``disorder=0``) is not a good
+    start: the vortices shear it, an affinely sheared lattice feels no background-pressure
+    force, and its rows collapse into lines after ``t ~ 0.1`` (docs/design.md).
+    ``relax_iterations=0`` gives the unrelaxed disordered start with lattice masses
+    ``rho0 dx^2`` (the start of earlier versions, with ``disorder=0.3``).
+
+    The initial density and masses follow ``params.sound_speed``,
+    ``params.reference_density`` and ``params.reference_pressure``
+    (``case.state_for(params)``; ``simulate(case, params)`` uses it).
 
     Args:
       n: particles per side (``dx = 1 / n``).
       reference_pressure_factor: ``p0 = factor * rho0 c0^2`` added to the pressure.
       disorder: largest random displacement from the lattice, in units of ``dx``.
       seed: seed of that displacement.
+      relax_iterations: pseudo-time steps of the packing (0: none).
     """
     n = check_resolution("n", n, 4)
     check_positive("reynolds", reynolds)
     check_positive("speed", speed)
     if not 0.0 <= disorder < 0.5:
         raise ValueError(f"disorder must lie in [0, 0.5) (units of dx), got {disorder}")
+    try:
+        whole = int(relax_iterations) == relax_iterations and relax_iterations >= 0
+    except (TypeError, ValueError, OverflowError):
+        whole = False
+    if not whole:
+        raise ValueError(
+            f"relax_iterations must be a whole number >= 0 (0: no packing), "
+            f"got {relax_iterations!r}"
+        )
     dx = 1.0 / n
+    kernel = as_kernel(kernel)
+    h = h_factor * dx
     x = lattice([0.0, 0.0], [1.0, 1.0], dx)
     rng = np.random.default_rng(seed)
     x = np.mod(x + disorder * dx * rng.uniform(-1.0, 1.0, x.shape), 1.0)
+    relaxed = relax_iterations > 0
+    if relaxed:
+        x, _ = relax_periodic(x, 1.0, kernel, h, int(relax_iterations))
+        neighbours = periodic_neighbours(x, 1.0, kernel.support * h)
     U, nu, rho0 = speed, speed / reynolds, 1.0
     c0 = sound_speed_factor * U
     X, Y = x[:, 0], x[:, 1]
@@ -80,7 +118,7 @@ def taylor_green(
         ],
         axis=-1,
     )
-    p = -(U**2 / 4.0) * (np.cos(4 * np.pi * X) + np.cos(4 * np.pi * Y))
+    pressure_shape = -0.25 * U**2 * (np.cos(4 * np.pi * X) + np.cos(4 * np.pi * Y))
     p0 = reference_pressure_factor * rho0 * c0**2
     gamma = float(gamma)
     params = make_params(
@@ -92,11 +130,21 @@ def taylor_green(
         artificial_alpha=artificial_alpha,
         transport_pressure=transport_pressure_factor * rho0 * c0**2,
     )
-    rho = np.asarray(tait_density(jnp.asarray(p + p0), rho0, c0, gamma, p0))
-    kernel = as_kernel(kernel)
+
+    def initial_state(p):
+        """Density of the analytic pressure (eq. 12 inverted) and masses from ``p``."""
+        rho0_p, p0_p = p.reference_density, p.reference_pressure
+        pressure = rho0_p * jnp.asarray(pressure_shape)
+        rho = tait_density(pressure + p0_p, rho0_p, p.sound_speed, gamma, p0_p)
+        if relaxed:
+            mass = summation_masses(x, neighbours, 1.0, kernel, h, rho)
+        else:
+            mass = rho0_p * dx**2
+        return make_state(x, u, rho, mass, Kind.FLUID)
+
     model = Model(
         dim=2,
-        smoothing_length=h_factor * dx,
+        smoothing_length=h,
         kernel=kernel,
         domain=Domain((0.0, 0.0), (1.0, 1.0), (True, True)),
         systems=(
@@ -110,9 +158,33 @@ def taylor_green(
             ),
         ),
     )
-    state = make_state(x, u, rho, rho0 * dx**2, Kind.FLUID)
-    info = dict(dx=dx, n=n, speed=U, viscosity=nu, reynolds=reynolds, decay_rate=-8 * np.pi**2 * nu)
-    return _finish("taylor_green", state, model, params, t_end, info)
+    state = initial_state(params)
+    info = dict(
+        dx=dx,
+        n=n,
+        speed=U,
+        viscosity=nu,
+        reynolds=reynolds,
+        decay_rate=-8 * np.pi**2 * nu,
+        relax_iterations=int(relax_iterations),
+    )
+    return _finish("taylor_green", state, model, params, t_end, info, initial_state=initial_state)
+
+
+def taylor_green_velocity(position, t, case: Case):
+    """Analytic Taylor-Green velocity ``e^{bt} (-U cos 2 pi x sin 2 pi y, U sin 2 pi x
+    cos 2 pi y)``, ``b = -8 pi^2 nu``, at ``position`` (``[..., 2]``; numpy or jax)."""
+    xp = np if isinstance(position, np.ndarray) else jnp
+    U, b = case.info["speed"], case.info["decay_rate"]
+    X, Y = position[..., 0], position[..., 1]
+    decay = xp.exp(b * xp.asarray(t))[..., None]
+    return decay * xp.stack(
+        [
+            -U * xp.cos(2 * np.pi * X) * xp.sin(2 * np.pi * Y),
+            U * xp.sin(2 * np.pi * X) * xp.cos(2 * np.pi * Y),
+        ],
+        axis=-1,
+    )
 
 
 def poiseuille(
@@ -228,9 +300,16 @@ def _tank(
     kind = np.concatenate([np.full(len(fluid), Kind.FLUID), np.full(len(walls), Kind.WALL)])
     # hydrostatic initial density so the column starts near equilibrium (eq. 12 inverted)
     gamma = fluid_kw.get("gamma", 7.0)
-    depth = np.where(kind == Kind.FLUID, fluid_height - x[:, 1], 0.0)
-    rho = np.asarray(tait_density(jnp.asarray(rho0 * g * depth), rho0, c0, gamma))
+    depth = jnp.asarray(np.where(kind == Kind.FLUID, fluid_height - x[:, 1], 0.0))
     params = make_params(2, reference_density=rho0, sound_speed=c0, gravity=(0.0, -g), **params_kw)
+
+    def initial_state(p):
+        """Density ``rho(p = rho0 g (H - y))`` and mass ``rho0 dx^2`` from ``p`` (eq. 12)."""
+        rho0_p = p.reference_density
+        pressure = rho0_p * (-p.gravity[-1]) * depth
+        rho = tait_density(pressure, rho0_p, p.sound_speed, gamma)
+        return make_state(x, 0.0, rho, rho0_p * dx**2, kind)
+
     margin = (layers + 2) * dx
     model = Model(
         dim=2,
@@ -241,8 +320,9 @@ def _tank(
         ),
         systems=(fluid_system(**fluid_kw), wall_system(wall_slip)),
     )
-    state = make_state(x, 0.0, rho, rho0 * dx**2, kind)
-    return _finish(name, state, model, params, t_end, info)
+    return _finish(
+        name, initial_state(params), model, params, t_end, info, initial_state=initial_state
+    )
 
 
 def hydrostatic_tank(
@@ -374,4 +454,11 @@ def surge_front(states, case: Case):
     return front / case.info["column_width"]
 
 
-__all__ = ["taylor_green", "poiseuille", "hydrostatic_tank", "dam_break", "QuinticSpline"]
+__all__ = [
+    "taylor_green",
+    "taylor_green_velocity",
+    "poiseuille",
+    "hydrostatic_tank",
+    "dam_break",
+    "QuinticSpline",
+]

@@ -85,9 +85,52 @@ def _solid_model(kernel, h, domain, penalty):
     )
 
 
-def _finish(name, x, velocity, kind, dx, rho, model, params, t_end, info, cfl):
+def plate_sound_speed(params):
+    """``c0 = sqrt(K / rho)`` with ``K = E / (3 (1 - 2 nu))`` from ``params`` (jax.numpy).
+
+    The three-dimensional bulk modulus of Gray, Monaghan & Swift (2001), which sets the
+    plate's initial velocity ``V_f c0 f(x / L)``.
+    """
+    E, nu = params.young_modulus, params.poisson_ratio
+    return jnp.sqrt(E / (3.0 * (1.0 - 2.0 * nu)) / params.solid_density)
+
+
+def plate_reference(case: Case, params=None) -> dict:
+    """Linear-theory reference of an oscillating-plate case for ``params`` (jax.numpy).
+
+    ``case.info`` holds these numbers for the parameters the case was built with; this
+    recomputes them for others (default ``case.params``): ``sound_speed`` (see
+    :func:`plate_sound_speed`), ``omega`` (:func:`plate_angular_frequency`), ``period``
+    and ``tip_amplitude = V_f c0 / omega``.
+    """
+    p = case.params if params is None else params
+    info = case.info
+    k = PLATE_KL / info["length"]
+    E, nu, rho = p.young_modulus, p.poisson_ratio, p.solid_density
+    omega = jnp.sqrt(E * info["thickness"] ** 2 * k**4 / (12.0 * rho * (1.0 - nu**2)))
+    c0 = plate_sound_speed(p)
+    return dict(
+        sound_speed=c0,
+        omega=omega,
+        period=2.0 * jnp.pi / omega,
+        tip_amplitude=info["amplitude"] * c0 / omega,
+    )
+
+
+def _finish(name, x, velocity, kind, dx, rho, model, params, t_end, info, cfl, velocity_fn=None):
+    """The Case; ``velocity_fn(params)``, if given, is the initial velocity for ``params``.
+
+    The state's density and mass follow ``params.solid_density`` too, so
+    ``case.state_for(params)`` is the state this factory builds with those parameters.
+    """
     volume = dx**2
-    state = make_state(x, velocity, rho, rho * volume, kind, volume=volume)
+
+    def initial_state(p):
+        v = velocity if velocity_fn is None else velocity_fn(p)
+        density = jnp.asarray(p.solid_density)
+        return make_state(x, v, density, density * volume, kind, volume=volume)
+
+    state = initial_state(params)
     dt = stable_time_step(state, model, params, solid_cfl=cfl)
     tips = _tip_indices(x, kind, info["centre_line"], dx)
     info = dict(
@@ -98,7 +141,16 @@ def _finish(name, x, velocity, kind, dx, rho, model, params, t_end, info, cfl):
         n_solid=int(np.sum(kind == Kind.SOLID)),
         n_clamped=int(np.sum(kind == Kind.CLAMPED)),
     )
-    return Case(name=name, state=state, model=model, params=params, dt=dt, t_end=t_end, info=info)
+    return Case(
+        name=name,
+        state=state,
+        model=model,
+        params=params,
+        dt=dt,
+        t_end=t_end,
+        info=info,
+        initial_state=initial_state,
+    )
 
 
 def oscillating_plate(
@@ -127,6 +179,12 @@ def oscillating_plate(
     amplitude ``V_f c0 / omega = 2.31e-3 m`` for ``V_f = 0.001``.  Linear theory: period
     ``2 pi / omega = 0.2541 s`` (:func:`plate_angular_frequency`).
 
+    The initial velocity follows the parameters: ``simulate(case, params)`` with another
+    ``young_modulus`` (or ``poisson_ratio``, ``solid_density``) starts from
+    ``case.state_for(params)``, the velocity ``V_f c0 f`` of those parameters.  The
+    reference numbers in ``case.info`` are for the parameters given here;
+    :func:`plate_reference` recomputes them for others.
+
     Args:
       n: particles across the thickness (``dx = H / n``).
       amplitude: ``V_f``.
@@ -154,10 +212,14 @@ def oscillating_plate(
     # clamped particles further than two kernel supports from the plate cannot act on it
     keep = x[:, 0] > -2.0 * kernel.support * h
     x, kind = x[keep], kind[keep]
-    c0 = math.sqrt(E / (3.0 * (1.0 - 2.0 * poisson_ratio)) / rho)
-    velocity = np.zeros_like(x)
     solid = kind == Kind.SOLID
-    velocity[solid, 1] = amplitude * c0 * plate_mode_shape(x[solid, 0] / L)
+    # v_y = V_f c0 f(x / L) on the plate, 0 on the clamp; c0 follows the parameters
+    profile = np.zeros_like(x)
+    profile[solid, 1] = amplitude * plate_mode_shape(x[solid, 0] / L)
+
+    def velocity_fn(p):
+        return plate_sound_speed(p) * jnp.asarray(profile)
+
     omega = plate_angular_frequency(L, H, E, rho, poisson_ratio)
     params = make_params(
         2,
@@ -169,6 +231,7 @@ def oscillating_plate(
     margin = L
     domain = Domain((-clamp_length - margin, -margin), (L + margin, margin), (False, False))
     model = _solid_model(kernel, h, domain, penalty_alpha is not None)
+    c0 = float(plate_sound_speed(params))
     info = dict(
         n=n,
         length=L,
@@ -181,7 +244,9 @@ def oscillating_plate(
         tip_amplitude=amplitude * c0 / omega,
         centre_line=0.0,
     )
-    return _finish("oscillating_plate", x, velocity, kind, dx, rho, model, params, t_end, info, cfl)
+    return _finish(
+        "oscillating_plate", x, 0.0, kind, dx, rho, model, params, t_end, info, cfl, velocity_fn
+    )
 
 
 # Turek & Hron (2006) CSM3 reference: tip u_y = -63.607 +- 65.160 mm,
@@ -207,6 +272,7 @@ def turek_hron_csm(
     cfl: float = 0.3,
     t_end: float = 2.0,
     clamp: str = "cylinder",
+    fill_root: bool = True,
 ) -> Case:
     """Turek-Hron CSM beam (CSM3 with the defaults): elastic beam behind a rigid cylinder.
 
@@ -229,6 +295,12 @@ def turek_hron_csm(
       clamp: ``"cylinder"`` (clamped lattice sites inside the cylinder, the default) or
         ``"strip"`` (the beam continued to the left of ``x = 0.25`` as clamped particles,
         like the plate's clamp; for comparison).
+      fill_root: with ``clamp="cylinder"``, make the lattice sites of the beam's band
+        between the cylinder's surface and ``x = 0.25`` free beam particles (default).
+        ``False`` leaves them out (the set-up of earlier versions), which notches the
+        root's outer fibres at some resolutions (one site per edge at 12 particles
+        across, two at 16) and adds 2.6 % and 6 % of the CSM3 mean deflection there
+        (docs/validation_solid.md).
     """
     n = check_resolution("n", n, 2)
     E = check_positive("young_modulus", young_modulus)
@@ -261,6 +333,13 @@ def turek_hron_csm(
     near = np.hypot(gap_x, gap_y) < 2.0 * cutoff
     clamped = cyl[inside & near]
     beam = _strip(x_root, y_low, nx, n, dx)
+    if clamp == "cylinder" and fill_root:
+        # The cylinder's surface lies left of x = 0.25 at the beam's edges (x = 0.24899 at
+        # y = 0.19 and 0.21): lattice sites of the beam's band outside the circle are beam
+        # material.  Left out, they would leave a notch at the root's outer fibres, where
+        # the bending stress is largest, whenever a site falls between the arc and 0.25.
+        band = (cyl[:, 1] > y_low) & (cyl[:, 1] < y_low + thickness) & (cyl[:, 0] > centre[0])
+        beam = np.concatenate([cyl[band & ~inside], beam])
     x = np.concatenate([beam, clamped])
     kind = np.concatenate([np.full(len(beam), Kind.SOLID), np.full(len(clamped), Kind.CLAMPED)])
     kind = kind.astype(np.int32)

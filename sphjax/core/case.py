@@ -22,9 +22,13 @@ class Case:
       params: differentiable :class:`Params`.
       dt: a stable time step for ``params`` (CFL and viscous/body-force limits).
       t_end: default end time.
-      info: case-specific numbers (resolution, geometry, reference values, probes).
-      initial_state: ``None``, or ``f(params) -> State`` for a case whose initial state
-        depends on its parameters (computed with ``jax.numpy``, so gradients see it).
+      info: case-specific numbers (resolution, geometry, reference values, probes), for
+        the parameters the case was built with.
+      initial_state: ``f(params) -> State`` for cases whose initial state depends on
+        parameters (the plate's initial velocity on the Young's modulus through its sound
+        speed, an initial density on ``sound_speed`` through the equation of state), or
+        ``None`` when it does not.  Written with ``jax.numpy``, so ``jax.grad`` with respect
+        to ``params`` sees the dependence.  Use :meth:`state_for`.
     """
 
     name: str
@@ -40,11 +44,18 @@ class Case:
     def n_particles(self) -> int:
         return self.state.n_particles
 
-    def state_for(self, params: Params) -> State:
-        """The initial State for ``params`` (``state`` unless it depends on them)."""
-        if self.initial_state is None or params is self.params:
+    def state_for(self, params: Params | None = None) -> State:
+        """The initial State for ``params`` (default ``self.params``).
+
+        ``case.state_for(case.params)`` equals ``case.state``; for other parameters it is
+        the state the case factory would have built with them (see ``initial_state``).
+        """
+        if self.initial_state is None or params is None or params is self.params:
             return self.state
         return self.initial_state(params)
 
     def replace(self, **changes) -> Case:
+        """A copy with ``changes``; a new ``state`` drops ``initial_state`` unless given."""
+        if "state" in changes:
+            changes.setdefault("initial_state", None)
         return dataclasses.replace(self, **changes)
