@@ -178,8 +178,8 @@ def main(argv=None):
             continue
         r = json.loads(proc.stdout.strip().splitlines()[-1])
         print(
-            f"{label} {r['particles']:>9} {r['forward_s']:>8.2f} {r['grad_s']:>8.2f} {r['ratio']:>8.2f} "
-            f"{r['peak_rss_mb']:>11.0f}",
+            f"{label} {r['particles']:>9} {r['forward_s']:>8.2f} {r['grad_s']:>8.2f} "
+            f"{r['ratio']:>8.2f} {r['peak_rss_mb']:>11.0f}",
             flush=True,
         )
         if args.json:
