@@ -57,3 +57,14 @@ def test_user_docs_cite_no_file_outside_the_repository(capsys):
     assert main(["cases"]) == 0
     listing = capsys.readouterr().out
     assert not [name for name in OUTSIDE if name in listing]
+
+
+@pytest.mark.slow
+def test_every_readme_python_block_runs(tmp_path, monkeypatch):
+    """The README's Python examples run as shown, in order (the quick start writes tg.h5)."""
+    monkeypatch.chdir(tmp_path)
+    blocks = re.findall(r"```python\n(.*?)```", README.read_text(), flags=re.S)
+    assert len(blocks) >= 3
+    for block in blocks:
+        exec(compile(block, "README.md", "exec"), {"__name__": "readme"})
+    assert (tmp_path / "tg.h5").is_file()

@@ -139,21 +139,24 @@ def _split_blocks(a, n_blocks, block, pad, pad_index):
     return a.reshape((n_blocks, block) + a.shape[1:])
 
 
-def _rowwise(fn, rows, block: int | None, pad_index: int):
+def _rowwise(fn, rows, block: int | None, pad_index: int, shared_output: bool = False):
     """``fn`` over blocks of ``block`` rows with ``lax.map``; ``rows`` a pytree of
     ``[N, ...]`` arrays, integer leaves padded with ``pad_index``.  Returns ``fn``'s pytree
-    of ``[N, ...]`` arrays."""
+    of ``[N, ...]`` arrays; with ``shared_output``, ``fn`` returns ``(per-row, shared)``
+    and the shared part is summed over the blocks."""
     n = jax.tree_util.tree_leaves(rows)[0].shape[0]
     if block is None or block >= n:
         return fn(rows)
     n_blocks = -(-n // block)
     pad = n_blocks * block - n
-
-    def split(a):
-        return _split_blocks(a, n_blocks, block, pad, pad_index)
-
-    out = jax.lax.map(fn, tree_map(split, rows))
-    return tree_map(lambda a: a.reshape((n_blocks * block,) + a.shape[2:])[:n], out)
+    out = jax.lax.map(
+        fn, tree_map(lambda a: _split_blocks(a, n_blocks, block, pad, pad_index), rows)
+    )
+    per_row, shared = out if shared_output else (out, None)
+    per_row = tree_map(lambda a: a.reshape((n_blocks * block,) + a.shape[2:])[:n], per_row)
+    if not shared_output:
+        return per_row
+    return per_row, tree_map(lambda a: jnp.sum(a, axis=0), shared)
 
 
 def _gather(fields, j):
@@ -212,77 +215,50 @@ def _sum_over_pairs(tree):
     return tree_map(lambda q: jnp.sum(q, axis=1), tree)
 
 
-def _adjoint_self(f, geometry, block, fields, shared, idx, obar):
-    """Cotangents of ``fields`` and ``shared`` for a sum within one system (both roles in
-    one pass over each particle's own row).
+def _adjoint_self(f, weight, parity, geometry, block, fields, shared, idx, obar):
+    """Cotangents of ``fields`` and ``shared`` for a sum ``w_b f(a, b)`` within one system:
+    both roles of each particle ``k`` in one pass over its own row.
 
-    The per-pair function is differentiated with respect to per-pair copies of its inputs
-    (the pair vector ``r_kb``, the row's fields), so that its derivative is
-    element-wise code that XLA fuses into one loop, like the forward; the sums over the
-    neighbours follow.  ``x_k`` enters through ``r_kb`` only.
+    Without ``parity``, ``k``'s neighbour role is ``f`` evaluated with the roles swapped,
+    ``w_k f(b, k)``.  With ``f(b, a) = parity * f(a, b)`` (``-1`` for the antisymmetric
+    pair forces of eqs. 10 and 14, ``+1`` for eqs. 5, 11 and 15) it is ``parity w_k
+    f(k, b)``: one evaluation of ``f`` serves both roles and its derivative is taken once,
+    with the cotangent ``w_b obar_k + parity w_k obar_b``; the parameters then see each
+    pair in both roles, and as the list is symmetric the two halves are equal, so their
+    cotangent is halved.
+
+    ``f`` is differentiated with respect to per-pair copies of its inputs (the pair vector
+    ``r_kb``, the row's fields), so that its derivative is element-wise code that XLA
+    fuses into one loop, like the forward; the sums over the neighbours follow.  ``x_k``
+    enters through ``r_kb`` only.
     """
     n = jax.tree_util.tree_leaves(fields)[0].shape[0]
+    full = _weighted(f, weight)
+
+    def both_roles(pair, a, b, s):
+        if parity is None:
+            as_row = _masked(full(pair, a, b, s), pair.mask)
+            swapped = full(pair.swapped(), b, a, jax.lax.stop_gradient(s))
+            return as_row, _masked(swapped, pair.mask)
+        term = _masked(f(pair, a, b, s), pair.mask)
+        return _scale(term, b[weight]), _scale(term, parity * a[weight])
 
     def one_block(args):
         fields_k, idx_k, obar_k = args
         valid = idx_k < n
         j = jnp.where(valid, idx_k, 0)
         b = _gather(fields, j)
-        obar_b = _gather(obar, j)
         a = _per_pair(fields_k, idx_k.shape)
         dr = geometry.displacement(a["x"], b["x"])
-        s = shared
-
-        def both_roles(dr, a, s):
-            pair = geometry.pairs_of(dr, valid)
-            as_row = _masked(f(pair, a, b, s), pair.mask)
-            as_neighbour = _masked(f(pair.swapped(), b, a, jax.lax.stop_gradient(s)), pair.mask)
-            return as_row, as_neighbour
-
-        _, pull = jax.vjp(both_roles, dr, a, s)
-        obar_rows = _per_pair(obar_k, idx_k.shape)
-        dr_bar, a_bar, s_bar = pull((obar_rows, obar_b))
+        _, pull = jax.vjp(
+            lambda dr, a, s: both_roles(geometry.pairs_of(dr, valid), a, b, s), dr, a, shared
+        )
+        dr_bar, a_bar, s_bar = pull((_per_pair(obar_k, idx_k.shape), _gather(obar, j)))
         a_bar = _sum_over_pairs(a_bar)
         a_bar["x"] = a_bar["x"] + jnp.sum(dr_bar, axis=1)
+        if parity is not None:
+            s_bar = tree_map(lambda q: 0.5 * q, s_bar)
         return a_bar, s_bar
-
-    return _rowwise_with_shared(one_block, (fields, idx, obar), block, n)
-
-
-def _adjoint_symmetric(g, weight, parity, geometry, block, fields, shared, idx, obar):
-    """Cotangents for a sum within one system whose pair term is ``w_b g(a, b)`` with
-    ``g(b, a) = parity * g(a, b)`` (``parity = -1`` for the antisymmetric pair forces of
-    eq. 10 and eq. 14, ``+1`` for eq. 5 and eq. 11).  Then ``k``'s neighbour role is
-    ``parity w_k g(k, b)``: one evaluation of ``g`` serves both roles, and its derivative
-    is taken once, with the cotangent ``w_b obar_k + parity w_k obar_b``.  The parameters
-    see each pair twice that way (once per role); over a symmetric list the two halves are
-    equal, so their cotangent is halved."""
-    n = jax.tree_util.tree_leaves(fields)[0].shape[0]
-
-    def one_block(args):
-        fields_k, idx_k, obar_k = args
-        valid = idx_k < n
-        j = jnp.where(valid, idx_k, 0)
-        b = _gather(fields, j)
-        obar_b = _gather(obar, j)
-        a = _per_pair(fields_k, idx_k.shape)
-        dr = geometry.displacement(a["x"], b["x"])
-        s = shared
-
-        def both_roles(dr, a, s):
-            pair = geometry.pairs_of(dr, valid)
-            term = _masked(g(pair, a, b, s), pair.mask)
-            as_row = _scale(term, b[weight])
-            as_neighbour = _scale(term, parity * a[weight])
-            return as_row, as_neighbour
-
-        _, pull = jax.vjp(both_roles, dr, a, s)
-        dr_bar, a_bar, s_bar = pull((_per_pair(obar_k, idx_k.shape), obar_b))
-        a_bar = _sum_over_pairs(a_bar)
-        a_bar["x"] = a_bar["x"] + jnp.sum(dr_bar, axis=1)
-        # the parameters' cotangent counted each pair in both roles: by the symmetry of
-        # the list, both halves are equal
-        return a_bar, tree_map(lambda q: 0.5 * q, s_bar)
 
     return _rowwise_with_shared(one_block, (fields, idx, obar), block, n)
 
@@ -290,18 +266,7 @@ def _adjoint_symmetric(g, weight, parity, geometry, block, fields, shared, idx, 
 def _rowwise_with_shared(one_block, rows, block, pad_index):
     """:func:`_rowwise` for a ``one_block`` that returns ``(per-row cotangents, shared
     cotangent)``: per-row ones are concatenated, the shared ones summed over blocks."""
-    n = jax.tree_util.tree_leaves(rows)[0].shape[0]
-    if block is None or block >= n:
-        return one_block(rows)
-    n_blocks = -(-n // block)
-    pad = n_blocks * block - n
-
-    def split(a):
-        return _split_blocks(a, n_blocks, block, pad, pad_index)
-
-    per_row, shared = jax.lax.map(one_block, tree_map(split, rows))
-    per_row = tree_map(lambda a: a.reshape((n_blocks * block,) + a.shape[2:])[:n], per_row)
-    return per_row, tree_map(lambda a: jnp.sum(a, axis=0), shared)
+    return _rowwise(one_block, rows, block, pad_index, shared_output=True)
 
 
 def _adjoint_cross(f, geometry, block, rows, cols, shared, idx, transpose, obar):
@@ -376,13 +341,10 @@ def _custom_sum(f, geometry, block, structure, same, weight=None, parity=None):
     def adjoint(flat, obar):
         rows, cols, shared, (idx, *transpose) = unflatten(flat)
         leaves = jax.tree_util.tree_leaves
-        if same and parity is not None:
-            fields_bar, shared_bar = _adjoint_symmetric(
+        if same:
+            fields_bar, shared_bar = _adjoint_self(
                 f, weight, parity, geometry, block, rows, shared, idx, obar
             )
-            return (*leaves(fields_bar), *leaves(shared_bar))
-        if same:
-            fields_bar, shared_bar = _adjoint_self(full, geometry, block, rows, shared, idx, obar)
             return (*leaves(fields_bar), *leaves(shared_bar))
         rows_bar, cols_bar, shared_bar = _adjoint_cross(
             full, geometry, block, rows, cols, shared, idx, transpose[0], obar
