@@ -173,10 +173,14 @@ def test_save_every_that_does_not_divide_the_steps(case, tmp_path):
     with TrajectoryWriter(tmp_path / "k3.h5", case) as writer:
         three = sphjax.simulate(case, n_steps=7, save_every=3, on_frames=writer)
     np.testing.assert_allclose(three.times / case.dt, [0, 3, 6, 7], rtol=1e-12)
+    # the two runs are different compiled programs (scans of 3 and of 1 step): equal to
+    # round-off (measured 1 ulp), not bit for bit
     for name in ("position", "velocity", "density"):
-        np.testing.assert_array_equal(
+        np.testing.assert_allclose(
             np.asarray(getattr(three.states, name)),
             np.asarray(getattr(every.states, name))[[0, 3, 6, 7]],
+            rtol=1e-13,
+            atol=1e-15,
         )
     read, _ = read_trajectory(tmp_path / "k3.h5")
     assert_same_tree(read, three)
