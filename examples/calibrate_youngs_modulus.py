@@ -29,7 +29,7 @@ import optax  # noqa: E402
 
 import sphjax  # noqa: E402
 from sphjax.calibrate import calibrate  # noqa: E402
-from sphjax.cases.solid import tip_displacement  # noqa: E402
+from sphjax.observables import tip_displacement  # noqa: E402
 
 # --- parameters -------------------------------------------------------------------
 N = 2  # particles across the thickness

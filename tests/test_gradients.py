@@ -358,7 +358,7 @@ def test_plate_tip_displacement_gradient_wrt_young_modulus_and_poisson_ratio():
     """d(tip u_y after 1000 steps)/dE and /dnu, oscillating plate n = 2 (48 particles,
     t = 0.052 s, 0.2 periods); central FD with relative steps 1e-4; rel. error <= 1e-4;
     forward vs reverse <= 1e-8."""
-    from sphjax.cases.solid import tip_displacement
+    from sphjax.observables import tip_displacement
 
     case = sphjax.cases.oscillating_plate(n=2)
 

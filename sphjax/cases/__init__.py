@@ -14,20 +14,22 @@ from sphjax.cases.fluid import (
     dam_break,
     hydrostatic_tank,
     poiseuille,
-    poiseuille_centreline_speed,
     poiseuille_startup_speed,
-    surge_front,
     taylor_green,
     taylor_green_velocity,
 )
 from sphjax.cases.solid import (
     oscillating_plate,
-    oscillation_stats,
     plate_mode_shape,
     plate_reference,
     plate_sound_speed,
-    tip_displacement,
     turek_hron_csm,
+)
+from sphjax.observables import (
+    oscillation_stats,
+    poiseuille_centreline_speed,
+    surge_front,
+    tip_displacement,
 )
 
 CASES = {

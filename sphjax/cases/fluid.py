@@ -259,23 +259,6 @@ def poiseuille_startup_speed(y, t, width, viscosity, body_force, terms: int = 20
     return u
 
 
-def poiseuille_centreline_speed(state, case: Case) -> float:
-    """Centreline speed ``u(L/2)`` of a Poiseuille state.
-
-    With an even number of rows the centreline lies between the rows at ``L/2 -+ dx/2``;
-    their mean speed is corrected by the curvature of the parabola,
-    ``F / (2 nu) (dx / 2)^2``.
-    """
-    info = case.info
-    L, dx = info["width"], info["dx"]
-    fluid = np.asarray(state.kind) == Kind.FLUID
-    y = np.asarray(state.position)[fluid, 1]
-    u = np.asarray(state.velocity)[fluid, 0]
-    near = np.abs(y - L / 2) < 0.6 * dx
-    curvature = info["body_force"] / (2 * info["viscosity"]) * (dx / 2) ** 2
-    return float(np.mean(u[near])) + curvature
-
-
 def _tank(
     name,
     fluid,
@@ -441,17 +424,6 @@ def dam_break(
         info,
         H,
     )
-
-
-def surge_front(states, case: Case):
-    """Surge front ``Z / L`` of a dam break: the rightmost fluid particle plus ``dx / 2``.
-
-    ``states`` may carry a leading time axis.
-    """
-    x = states.position[..., 0]
-    fluid = states.kind == Kind.FLUID
-    front = jnp.max(jnp.where(fluid, x, -jnp.inf), axis=-1) + 0.5 * case.info["dx"]
-    return front / case.info["column_width"]
 
 
 __all__ = [
