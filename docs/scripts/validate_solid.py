@@ -5,8 +5,8 @@
 * Oscillating plate (Gray, Monaghan & Swift 2001), V_f = 0.001: period and tip amplitude
   at three resolutions against linear theory (T = 0.2541 s, A = 2.31e-3 m).
 * Turek-Hron CSM3: tip displacement at three resolutions against the finite-element
-  reference curve ``../shared/reference/turek_hron_csm3_tip_displacement.csv`` and the
-  table values (u_y = -63.607 +- 65.160 mm, 1.0995 Hz).
+  reference curve of Turek & Hron (2006), the benchmark's published CSM3 tip
+  displacement (``docs/data/turek_hron_csm3_tip_displacement.csv``), and the table values (u_y = -63.607 +- 65.160 mm, 1.0995 Hz).
 
 Writes ``docs/figures/solid_plate.png``, ``docs/figures/solid_csm3.png`` and
 ``docs/figures/validation_solid.json``; prints Markdown tables.  Float32, as a user runs.
@@ -30,7 +30,7 @@ from sphjax.cases import oscillation_stats, tip_displacement  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[2]
 FIGURES = ROOT / "docs" / "figures"
-REFERENCE = ROOT.parent / "shared" / "reference" / "turek_hron_csm3_tip_displacement.csv"
+REFERENCE = ROOT / "docs" / "data" / "turek_hron_csm3_tip_displacement.csv"
 PLATE_PERIOD, PLATE_AMPLITUDE = 0.2541, 2.31e-3
 CSM3 = dict(mean=-63.607e-3, amplitude=65.160e-3, frequency=1.0995)
 
