@@ -6,7 +6,8 @@
   at three resolutions against linear theory (T = 0.2541 s, A = 2.31e-3 m).
 * Turek-Hron CSM3: tip displacement at three resolutions against the finite-element
   reference curve of Turek & Hron (2006), the benchmark's published CSM3 tip
-  displacement (``docs/data/turek_hron_csm3_tip_displacement.csv``), and the table values (u_y = -63.607 +- 65.160 mm, 1.0995 Hz).
+  displacement (``docs/data/turek_hron_csm3_tip_displacement.csv``), and the table
+  values (u_y = -63.607 +- 65.160 mm, 1.0995 Hz).
 
 Writes ``docs/figures/solid_plate.png``, ``docs/figures/solid_csm3.png`` and
 ``docs/figures/validation_solid.json``; prints Markdown tables.  Float32, as a user runs.
