@@ -33,6 +33,7 @@ from sphjax.physics.rhs import (
     NEIGHBOR_IDX,
     Neighbors,
     build_neighbors,
+    check_params,
     evaluate,
     overflowed,
     update_neighbors,
@@ -220,8 +221,9 @@ def simulate(
       :class:`Trajectory` with ``ceil(n_steps / save_every) + 1`` frames.
     """
     params = case.params if params is None else params
-    state = case.state_for(params) if state is None else state
     model = case.model
+    check_params(model, params)
+    state = case.state_for(params) if state is None else state
     dt = case.dt if dt is None else dt
     if n_steps is None:
         t_end = case.t_end if t_end is None else t_end

@@ -283,7 +283,8 @@ class Context:
         )
 
 
-def _check_params(model, params):
+def check_params(model, params):
+    """Raise a ValueError if ``params`` lacks the group a system of ``model`` needs."""
     for system in model.systems:
         group = "solid" if isinstance(system, SolidSystem) else "fluid"
         if object.__getattribute__(params, group) is None:
@@ -313,7 +314,7 @@ def update_stage(state: State, neighbors: Neighbors, model, params, density_step
     """Stage 1: each system's fields after its update, in the fixed order fluids, walls,
     solids.  Returns one dict per system (``x, v, m, rho`` and what the update adds:
     fluid ``p, drho``; wall ``p, rho, v_viscous``; solid ``L0, F, P, PL0``)."""
-    _check_params(model, params)
+    check_params(model, params)
     if ctx is None:
         ctx = Context(params, Geometry.of(model), model.pair_adjoint, model.pair_block)
     blocks = neighbors.blocks
