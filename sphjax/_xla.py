@@ -6,16 +6,16 @@ instead of splitting it into many YNNPACK calls, each writing an ``[N, K]`` arra
 memory.  On the 2D Taylor-Green benchmark it halves the CPU time of a step (see
 ``docs/performance.md``); results are the same to round-off.
 
-The flags are added to ``XLA_FLAGS`` only if the user has not set the same flag, only for
-the jaxlib versions that know them (an unknown flag aborts XLA), and only if no JAX
-backend exists yet (afterwards they would have no effect).  ``SPHJAX_XLA_DEFAULTS=0``
-turns this off.
+The flags are added to ``XLA_FLAGS`` only if the user has not set the same flag and only
+for the jaxlib versions that know them (an unknown flag aborts XLA).  XLA reads the
+variable when JAX creates its CPU backend, so importing sphjax after a JAX computation has
+already run leaves that process's backend as it was.  ``SPHJAX_XLA_DEFAULTS=0`` turns this
+off.
 """
 
 from __future__ import annotations
 
 import os
-import sys
 
 # (flag, first jaxlib version known to accept it)
 DEFAULT_FLAGS = (("--xla_cpu_experimental_ynn_fusion_type=", (0, 10)),)
@@ -29,14 +29,9 @@ def _version(text: str) -> tuple[int, ...]:
     return tuple(parts)
 
 
-def _backend_exists() -> bool:
-    xla_bridge = sys.modules.get("jax._src.xla_bridge")
-    return bool(getattr(xla_bridge, "_backends", None))
-
-
 def apply_default_flags() -> list[str]:
     """Add :data:`DEFAULT_FLAGS` to ``XLA_FLAGS``; returns the flags added."""
-    if os.environ.get("SPHJAX_XLA_DEFAULTS", "1").strip() == "0" or _backend_exists():
+    if os.environ.get("SPHJAX_XLA_DEFAULTS", "1").strip() == "0":
         return []
     try:
         from importlib.metadata import version

@@ -380,3 +380,24 @@ def test_plate_tip_displacement_gradient_wrt_young_modulus_and_poisson_ratio():
     assert relative_error(g_E, fd_E) <= 1e-4
     assert relative_error(g_nu, fd_nu) <= 1e-4
     assert relative_error(tangent, E0 * g_E + nu0 * g_nu) <= 1e-8
+
+
+def test_custom_adjoint_falls_back_to_autodiff_on_an_untested_jax(monkeypatch):
+    """The one private JAX hook (a ``linear_call`` batching rule) is installed only for the
+    tested JAX versions; on any other, ``custom_adjoint`` returns the plain function."""
+    from sphjax import _linear_call
+
+    def fun(x):
+        return jnp.sin(x)
+
+    def adjoint(args, cotangent):
+        raise AssertionError("the custom adjoint must not be used on an untested JAX")
+
+    monkeypatch.setattr(_linear_call, "TESTED_JAX", ())
+    _linear_call.hook_installed.cache_clear()
+    try:
+        plain = _linear_call.custom_adjoint(fun, adjoint, n_linear=1)
+        assert plain is fun
+        assert float(jax.grad(plain)(0.3)) == pytest.approx(np.cos(0.3))
+    finally:
+        _linear_call.hook_installed.cache_clear()
