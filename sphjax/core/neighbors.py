@@ -196,3 +196,36 @@ def measured_capacity(union_idx, rows, cols, multiplier: float, extra: int = 0) 
     inside = (block >= cols[0]) & (block < cols[1])
     most = int(inside.sum(axis=1).max(initial=0))
     return max(1, int(math.ceil(most * multiplier)) + int(extra))
+
+
+def compact_rows(idx, n_cols: int, capacity: int):
+    """The rows of a list ``idx`` (``[n_rows, K]``, padded with ``n_cols``) that have
+    neighbours, packed into ``capacity`` rows.
+
+    Returns ``(members, packed, position, overflow)``: ``members`` ``[capacity]`` the row
+    indices (padded with ``n_rows``), ``packed`` ``[capacity, K]`` their rows of ``idx``
+    (padding rows empty), ``position`` ``[n_rows + 1]`` each row's place in ``members``
+    (``capacity`` for rows without neighbours and for the padding index ``n_rows``), and
+    whether more than ``capacity`` rows have neighbours.
+    """
+    n_rows = idx.shape[0]
+    has = jnp.any(idx < n_cols, axis=1)
+    members = jnp.nonzero(has, size=capacity, fill_value=n_rows)[0].astype(jnp.int32)
+    real = members < n_rows
+    packed = jnp.where(real[:, None], idx[jnp.minimum(members, n_rows - 1)], n_cols)
+    position = (
+        jnp.full(n_rows + 1, capacity, jnp.int32)
+        .at[members]
+        .set(jnp.arange(capacity, dtype=jnp.int32), mode="drop")
+    )
+    position = position.at[n_rows].set(capacity)
+    return members, packed.astype(jnp.int32), position, jnp.sum(has) > capacity
+
+
+def measured_members(union_idx, rows, cols, multiplier: float, extra: int = 0) -> int:
+    """How many rows of ``rows`` have a neighbour in ``cols`` (concrete ``union_idx``),
+    times ``multiplier``, plus ``extra``: the capacity of :func:`compact_rows`."""
+    block = np.asarray(union_idx[rows[0] : rows[1]])
+    inside = (block >= cols[0]) & (block < cols[1])
+    count = int(inside.any(axis=1).sum())
+    return max(1, int(math.ceil(count * multiplier)) + int(extra))

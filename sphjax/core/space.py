@@ -8,6 +8,7 @@ gradient that stays finite at ``dr = 0`` (the double-where idiom).
 
 from __future__ import annotations
 
+import jax
 import jax.numpy as jnp
 import numpy as np
 
@@ -61,7 +62,62 @@ def safe_norm(dr, axis=-1):
     return jnp.where(positive, jnp.sqrt(jnp.where(positive, r2, 1.0)), 0.0)
 
 
+@jax.custom_jvp
 def dot(a, b):
     """``a . b`` over the last (spatial) axis, written out: XLA on the CPU ends a loop
-    fusion at a reduction, even over two or three components."""
+    fusion at a reduction, even over two or three components.
+
+    Its derivative is written as a product and a sum over the axis, so that its transpose
+    (reverse mode) is the element-wise ``cotangent * b`` rather than one padded array per
+    component."""
     return sum(a[..., i] * b[..., i] for i in range(a.shape[-1]))
+
+
+def _dot_jvp(primals, tangents):
+    a, b = primals
+    da, db = tangents
+    zero = jax.custom_derivatives.SymbolicZero
+    terms = [
+        t
+        for t in (
+            None if isinstance(da, zero) else da * b,
+            None if isinstance(db, zero) else a * db,
+        )
+        if t is not None
+    ]
+    if not terms:
+        return dot(a, b), jnp.zeros(jnp.broadcast_shapes(a.shape, b.shape)[:-1], a.dtype)
+    return dot(a, b), jnp.sum(sum(terms), axis=-1)
+
+
+dot.defjvp(_dot_jvp, symbolic_zeros=True)
+
+
+@jax.custom_jvp
+def scale(s, v):
+    """``s[..., None] * v``: a scalar field times a vector field.
+
+    Its derivative is written per component (a stack of products), so that its transpose
+    is element-wise code rather than a reduction over the spatial axis, which would end
+    XLA's loop fusion on the CPU."""
+    return s[..., None] * v
+
+
+def _scale_jvp(primals, tangents):
+    s, v = primals
+    ds, dv = tangents
+    zero = jax.custom_derivatives.SymbolicZero
+    d = v.shape[-1]
+    out = scale(s, v)
+    shape = jnp.broadcast_shapes(s.shape + (1,), v.shape)
+    tangent = jnp.zeros(shape, out.dtype)
+    if not isinstance(ds, zero):
+        tangent = tangent + jnp.stack(
+            [jnp.broadcast_to(ds * v[..., i], shape[:-1]) for i in range(d)], axis=-1
+        )
+    if not isinstance(dv, zero):
+        tangent = tangent + s[..., None] * dv
+    return out, tangent
+
+
+scale.defjvp(_scale_jvp, symbolic_zeros=True)

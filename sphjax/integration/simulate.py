@@ -31,6 +31,7 @@ from sphjax.integration import step as kdk
 from sphjax.integration.timestep import check_time_step
 from sphjax.physics.rhs import (
     NEIGHBOR_IDX,
+    UPDATE_FIELDS,
     Neighbors,
     build_neighbors,
     check_params,
@@ -52,7 +53,8 @@ class NeighborOverflowError(RuntimeError):
     """The neighbour list ran out of room where it cannot be re-allocated."""
 
 
-_KEEP_NEIGHBOR_IDX = jax.checkpoint_policies.save_only_these_names(NEIGHBOR_IDX)
+_KEEP_UPDATE = jax.checkpoint_policies.save_only_these_names(UPDATE_FIELDS)
+_KEEP_NEIGHBOR_IDX = jax.checkpoint_policies.save_only_these_names(NEIGHBOR_IDX, UPDATE_FIELDS)
 
 
 # ---------------------------------------------------------------------------- one step
@@ -111,14 +113,15 @@ def _run_steps(carry, n_steps: int, checkpoint_every: int | None, step_fn):
         return step_fn(c), None
 
     if checkpoint_every is None or n_steps <= 1:
-        return jax.lax.scan(jax.checkpoint(body), carry, None, length=n_steps)[0]
+        body = jax.checkpoint(body, policy=_KEEP_UPDATE, prevent_cse=False)
+        return jax.lax.scan(body, carry, None, length=n_steps)[0]
     # a step's replay keeps its neighbour indices (recorded by the chunk replay) rather
     # than repeating the cell-list search
-    body = jax.checkpoint(body, policy=_KEEP_NEIGHBOR_IDX)
+    body = jax.checkpoint(body, policy=_KEEP_NEIGHBOR_IDX, prevent_cse=False)
     chunk_len = min(checkpoint_every, n_steps)
     n_chunks, rest = divmod(n_steps, chunk_len)
 
-    @jax.checkpoint
+    @functools.partial(jax.checkpoint, prevent_cse=False)
     def chunk(c, _):
         return jax.lax.scan(body, c, None, length=chunk_len)[0], None
 
@@ -252,7 +255,7 @@ def simulate(
     # Allocation needs concrete values; inside an outer ``jit`` the jax-md set-up would
     # otherwise be staged out and fail on a traced box size.
     with jax.ensure_compile_time_eval():
-        neighbors = build_neighbors(neighbor_state, model)
+        neighbors = build_neighbors(neighbor_state, model, compact_rows=not traced)
     if traced:
         run = functools.partial(_simulate_traced, checkpoint_every=checkpoint_every)
     else:
@@ -375,7 +378,7 @@ def _run_chunk_growing(carry, dt, params, model, save_every, n_frames, extra):
         # grow on every retry: the chunk's start positions may need less room than the
         # positions where it overflowed
         extra[0] = max(extra[0] + old // 2, 1)
-        neighbors = build_neighbors(state, model, extra_capacity=extra[0])
+        neighbors = build_neighbors(state, model, extra_capacity=extra[0], compact_rows=True)
         carry = (state, neighbors, *carry[2:])
         warnings.warn(
             f"neighbour list overflowed near step {int(step)}; re-allocated "

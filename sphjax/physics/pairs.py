@@ -21,7 +21,10 @@ cotangent of particle ``k``'s fields is a sum over ``k``'s own row:
     abar_k = sum_{b in N(k)} d f(k, b)/d a_k^T obar_k            (k as the row particle)
            + sum_{b in N^T(k)} d f(b, k)/d b_k^T obar_b          (k as the neighbour)
 
-The per-pair derivatives are ``jax.vjp`` of ``f`` itself, evaluated in blocks of particles
+The per-pair derivatives are ``jax.vjp`` of ``f`` itself (with the chain rule of the pair
+geometry, :meth:`Geometry.pullback`, and the vector products of :mod:`sphjax.core.space`,
+``dot`` and ``scale``, whose derivatives are written so that their transposes fuse),
+evaluated in blocks of particles
 whose per-pair arrays stay in cache, gathering only per-particle arrays: the forward is
 written once and its adjoint follows from it.  Within one system both roles share one pass
 and one geometry.  The adjoint is attached with :func:`sphjax._linear_call.custom_adjoint`,
@@ -40,7 +43,7 @@ import jax.numpy as jnp
 from sphjax._linear_call import custom_adjoint
 from sphjax.core import kernels
 from sphjax.core.pytree import pytree_dataclass
-from sphjax.core.space import displacement_fn
+from sphjax.core.space import displacement_fn, dot, scale
 
 tree_map = jax.tree_util.tree_map
 
@@ -96,6 +99,11 @@ class Geometry:
 
     def pairs_of(self, dr, valid) -> PairGeometry:
         """Pair geometry from the pair vectors ``r_ab`` (``[B, K, d]``)."""
+        return self._pairs_and_factors(dr, valid, second=False)[0]
+
+    def _pairs_and_factors(self, dr, valid, second: bool):
+        """:meth:`pairs_of`, and with ``second`` the radial factors ``F = W'(r) / r`` and
+        ``G = F'(r) / r`` that :meth:`pullback` needs (0 outside the support, at r = 0)."""
         r2 = sum(dr[..., i] * dr[..., i] for i in range(dr.shape[-1]))
         mask = valid & (r2 < self.cutoff**2)
         inside = mask & (r2 > 0)  # coincident particles: W(0), no gradient
@@ -103,11 +111,34 @@ class Geometry:
         dr = jnp.where(mask[..., None], dr, 0.0)
         h, dim = self.smoothing_length, self.dim
         w = jnp.where(mask, kernels.W(self.kernel, r, h, dim), 0.0)
-        factor = jnp.where(
-            inside, kernels.dW_dr(self.kernel, jnp.where(inside, r, 1.0), h, dim), 0.0
-        )
-        grad_w = (factor / jnp.where(inside, r, 1.0))[..., None] * dr
-        return PairGeometry(dr=dr, r=r, w=w, grad_w=grad_w, mask=mask)
+        r_safe = jnp.where(inside, r, 1.0)
+        if second:
+            first, curvature = jax.jvp(
+                lambda r: kernels.dW_dr(self.kernel, r, h, dim), (r_safe,), (jnp.ones_like(r),)
+            )
+        else:
+            first = kernels.dW_dr(self.kernel, r_safe, h, dim)
+        factor = jnp.where(inside, first / r_safe, 0.0)
+        grad_w = factor[..., None] * dr
+        pair = PairGeometry(dr=dr, r=r, w=w, grad_w=grad_w, mask=mask)
+        if not second:
+            return pair, None
+        g = jnp.where(inside, (curvature - factor) / r_safe**2, 0.0)
+        return pair, (factor, g, jnp.where(inside, 1.0 / r_safe, 0.0))
+
+    @staticmethod
+    def pullback(pair: PairGeometry, factors, bar: PairGeometry):
+        """Cotangent of ``r_ab`` from the cotangents ``bar`` of the pair geometry's fields.
+
+        With ``F = W'(r)/r`` and ``G = F'(r)/r``: ``d r / d r_ab = r_ab / r``,
+        ``d W / d r_ab = F r_ab`` and ``d (F r_ab) / d r_ab = F I + G r_ab r_ab^T`` (the
+        chain rule of eq. 2, written once for every pair term).
+        """
+        factor, g, inverse_r = factors
+        dr = pair.dr
+        radial = bar.r * inverse_r + bar.w * factor + g * dot(dr, bar.grad_w)
+        direct = jnp.where(pair.mask[..., None], bar.dr, 0.0)
+        return direct + factor[..., None] * bar.grad_w + radial[..., None] * dr
 
 
 @pytree_dataclass(static=("n_rows", "n_cols"))
@@ -115,16 +146,26 @@ class PairList:
     """Neighbours of the particles of one system (rows) among those of another (columns).
 
     Attributes:
-      idx: ``[n_rows, K]`` column indices, padded with ``n_cols``.
+      idx: ``[n_rows, K]`` column indices, padded with ``n_cols`` (``[M, K]`` for the
+        ``members`` only, when given).
       transpose: ``[n_cols, K']`` row indices of each column particle's neighbours, padded
         with ``n_rows`` (the same pairs seen from the columns), or ``None`` when rows and
-        columns are the same particles (the list is then its own transpose).
+        columns are the same particles (the list is then its own transpose).  With
+        ``members`` its entries are positions in ``members`` (padded with ``M``); with
+        ``transpose_members`` its rows are those columns only.
+      members: ``None``, or ``[M]`` the rows that have neighbours at all (padded with
+        ``n_rows``): a fluid's list against a wall covers only the fluid particles near
+        the wall, so the sum costs ``M`` rows, not ``n_rows``.
+      transpose_members: ``None``, or ``[M']`` the columns the rows of ``transpose`` are
+        (padded with ``n_cols``).
     """
 
     idx: jax.Array
     transpose: jax.Array | None
     n_rows: int
     n_cols: int
+    members: jax.Array | None = None
+    transpose_members: jax.Array | None = None
 
 
 def _split_blocks(a, n_blocks, block, pad, pad_index):
@@ -159,13 +200,23 @@ def _rowwise(fn, rows, block: int | None, pad_index: int, shared_output: bool = 
     return per_row, tree_map(lambda a: jnp.sum(a, axis=0), shared)
 
 
+def _without_mask(pair: PairGeometry):
+    """The differentiable fields of ``pair`` (its mask is boolean)."""
+    return (pair.dr, pair.r, pair.w, pair.grad_w)
+
+
+def _with_mask(fields, mask) -> PairGeometry:
+    dr, r, w, grad_w = fields
+    return PairGeometry(dr=dr, r=r, w=w, grad_w=grad_w, mask=mask)
+
+
 def _gather(fields, j):
     return tree_map(lambda q: q[j], fields)
 
 
 def _masked(out, mask):
     return tree_map(
-        lambda o: jnp.where(mask.reshape(mask.shape + (1,) * (o.ndim - 2)), o, 0.0), out
+        lambda o: jnp.where(mask.reshape(mask.shape + (1,) * (o.ndim - mask.ndim)), o, 0.0), out
     )
 
 
@@ -189,7 +240,12 @@ def _weighted(f, weight):
 
 
 def _scale(out, factor):
-    return tree_map(lambda o: o * factor.reshape(factor.shape + (1,) * (o.ndim - factor.ndim)), out)
+    def one(o):
+        if o.ndim == factor.ndim + 1:
+            return scale(factor, o)
+        return o * factor.reshape(factor.shape + (1,) * (o.ndim - factor.ndim))
+
+    return tree_map(one, out)
 
 
 def _forward(f, geometry, block, rows, cols, shared, idx):
@@ -227,10 +283,12 @@ def _adjoint_self(f, weight, parity, geometry, block, fields, shared, idx, obar)
     pair in both roles, and as the list is symmetric the two halves are equal, so their
     cotangent is halved.
 
-    ``f`` is differentiated with respect to per-pair copies of its inputs (the pair vector
-    ``r_kb``, the row's fields), so that its derivative is element-wise code that XLA
-    fuses into one loop, like the forward; the sums over the neighbours follow.  ``x_k``
-    enters through ``r_kb`` only.
+    ``f`` is differentiated with respect to per-pair copies of its inputs (the pair
+    geometry's fields, the row's fields), so that its derivative is element-wise code
+    that XLA fuses into few loops, like the forward; the sums over the neighbours follow.
+    The pair geometry's own derivative (``r``, ``W`` and ``grad W`` as functions of
+    ``r_kb``) is :meth:`Geometry.pullback`, written once; ``x_k`` enters through ``r_kb``
+    only.
     """
     n = jax.tree_util.tree_leaves(fields)[0].shape[0]
     full = _weighted(f, weight)
@@ -250,10 +308,15 @@ def _adjoint_self(f, weight, parity, geometry, block, fields, shared, idx, obar)
         b = _gather(fields, j)
         a = _per_pair(fields_k, idx_k.shape)
         dr = geometry.displacement(a["x"], b["x"])
+        pair, factors = geometry._pairs_and_factors(dr, valid, second=True)
         _, pull = jax.vjp(
-            lambda dr, a, s: both_roles(geometry.pairs_of(dr, valid), a, b, s), dr, a, shared
+            lambda p, a, s: both_roles(_with_mask(p, pair.mask), a, b, s),
+            _without_mask(pair),
+            a,
+            shared,
         )
-        dr_bar, a_bar, s_bar = pull((_per_pair(obar_k, idx_k.shape), _gather(obar, j)))
+        pair_bar, a_bar, s_bar = pull((_per_pair(obar_k, idx_k.shape), _gather(obar, j)))
+        dr_bar = Geometry.pullback(pair, factors, _with_mask(pair_bar, pair.mask))
         a_bar = _sum_over_pairs(a_bar)
         a_bar["x"] = a_bar["x"] + jnp.sum(dr_bar, axis=1)
         if parity is not None:
@@ -269,9 +332,10 @@ def _rowwise_with_shared(one_block, rows, block, pad_index):
     return _rowwise(one_block, rows, block, pad_index, shared_output=True)
 
 
-def _adjoint_cross(f, geometry, block, rows, cols, shared, idx, transpose, obar):
+def _adjoint_cross(f, geometry, block, rows, cols, shared, idx, transpose, obar, members=None):
     """Cotangents of ``rows``, ``cols`` and ``shared`` for a sum of one system's rows over
-    another system's particles: one pass over the rows, one over the columns."""
+    another system's particles: one pass over the rows, one over the columns (over the
+    columns ``members`` only, when given: the rows of ``transpose``)."""
     n_rows = jax.tree_util.tree_leaves(rows)[0].shape[0]
     n_cols = jax.tree_util.tree_leaves(cols)[0].shape[0]
 
@@ -281,14 +345,14 @@ def _adjoint_cross(f, geometry, block, rows, cols, shared, idx, transpose, obar)
         b = _gather(cols, jnp.where(valid, idx_k, 0))
         a = _per_pair(rows_k, idx_k.shape)
         dr = geometry.displacement(a["x"], b["x"])
-        s = shared
+        pair, factors = geometry._pairs_and_factors(dr, valid, second=True)
 
-        def as_row(dr, a, s):
-            pair = geometry.pairs_of(dr, valid)
-            return _masked(f(pair, a, b, s), pair.mask)
+        def as_row(p, a, s):
+            return _masked(f(_with_mask(p, pair.mask), a, b, s), pair.mask)
 
-        _, pull = jax.vjp(as_row, dr, a, s)
-        dr_bar, a_bar, s_bar = pull(_per_pair(obar_k, idx_k.shape))
+        _, pull = jax.vjp(as_row, _without_mask(pair), a, shared)
+        pair_bar, a_bar, s_bar = pull(_per_pair(obar_k, idx_k.shape))
+        dr_bar = Geometry.pullback(pair, factors, _with_mask(pair_bar, pair.mask))
         a_bar = _sum_over_pairs(a_bar)
         a_bar["x"] = a_bar["x"] + jnp.sum(dr_bar, axis=1)
         return a_bar, s_bar
@@ -301,23 +365,30 @@ def _adjoint_cross(f, geometry, block, rows, cols, shared, idx, transpose, obar)
         obar_a = _gather(obar, j)
         b = _per_pair(cols_k, idx_k.shape)
         dr = geometry.displacement(a["x"], b["x"])
+        pair, factors = geometry._pairs_and_factors(dr, valid, second=True)
 
-        def as_neighbour(dr, b):
-            pair = geometry.pairs_of(dr, valid)
-            return _masked(f(pair, a, b, shared), pair.mask)
+        def as_neighbour(p, b):
+            p = _with_mask(p, pair.mask)
+            return _masked(f(p, a, b, shared), pair.mask)
 
-        _, pull = jax.vjp(as_neighbour, dr, b)
-        dr_bar, b_bar = pull(obar_a)
+        _, pull = jax.vjp(as_neighbour, _without_mask(pair), b)
+        pair_bar, b_bar = pull(obar_a)
+        dr_bar = Geometry.pullback(pair, factors, _with_mask(pair_bar, pair.mask))
         b_bar = _sum_over_pairs(b_bar)
         b_bar["x"] = b_bar["x"] - jnp.sum(dr_bar, axis=1)
         return b_bar
 
     rows_bar, shared_bar = _rowwise_with_shared(row_block, (rows, idx, obar), block, n_cols)
-    cols_bar = _rowwise(col_block, (cols, transpose), block, n_rows)
+    if members is None:
+        cols_bar = _rowwise(col_block, (cols, transpose), block, n_rows)
+        return rows_bar, cols_bar, shared_bar
+    cols_m = tree_map(lambda q: q[jnp.minimum(members, n_cols - 1)], cols)
+    bar_m = _rowwise(col_block, (cols_m, transpose), block, n_rows)
+    cols_bar = tree_map(lambda q, b: jnp.zeros_like(q).at[members].add(b, mode="drop"), cols, bar_m)
     return rows_bar, cols_bar, shared_bar
 
 
-def _custom_sum(f, geometry, block, structure, same, weight=None, parity=None):
+def _custom_sum(f, geometry, block, structure, same, weight=None, parity=None, compact=False):
     """The pair sum of ``f`` with its adjoint attached."""
     rows_def, cols_def, shared_def, n_rows_leaves, n_cols_leaves, n_shared = structure
 
@@ -340,6 +411,7 @@ def _custom_sum(f, geometry, block, structure, same, weight=None, parity=None):
 
     def adjoint(flat, obar):
         rows, cols, shared, (idx, *transpose) = unflatten(flat)
+        members = transpose[1] if compact else None
         leaves = jax.tree_util.tree_leaves
         if same:
             fields_bar, shared_bar = _adjoint_self(
@@ -347,7 +419,7 @@ def _custom_sum(f, geometry, block, structure, same, weight=None, parity=None):
             )
             return (*leaves(fields_bar), *leaves(shared_bar))
         rows_bar, cols_bar, shared_bar = _adjoint_cross(
-            full, geometry, block, rows, cols, shared, idx, transpose[0], obar
+            full, geometry, block, rows, cols, shared, idx, transpose[0], obar, members
         )
         return (*leaves(rows_bar), *leaves(cols_bar), *leaves(shared_bar))
 
@@ -395,6 +467,8 @@ def pair_sum(
     same = cols is None
     if parity is not None and (not same or weight is None):
         raise ValueError("pair_sum: parity needs a sum within one system and a weight")
+    if pairs.members is not None:
+        return _member_sum(f, rows, cols, pairs, geometry, shared, weight, adjoint, block)
     if not adjoint:
         full = _weighted(f, weight)
         return _forward(full, geometry, None, rows, rows if same else cols, shared, pairs.idx)
@@ -411,10 +485,32 @@ def pair_sum(
         len(cols_leaves),
         len(shared_leaves),
     )
-    fn = _custom_sum(f, geometry, block, structure, same, weight, parity)
+    compact = pairs.transpose_members is not None
+    fn = _custom_sum(f, geometry, block, structure, same, weight, parity, compact)
     dtype = rows_leaves[0].dtype
     shared_leaves = [jnp.asarray(s, dtype) for s in shared_leaves]
     args = [*rows_leaves, *([] if same else cols_leaves), *shared_leaves, pairs.idx]
     if not same:
         args.append(pairs.transpose)
+    if compact:
+        args.append(pairs.transpose_members)
     return fn(*args)
+
+
+def _member_sum(f, rows, cols, pairs: PairList, geometry, shared, weight, adjoint, block):
+    """:func:`pair_sum` over the rows ``pairs.members`` only, scattered back to all rows
+    (the others have no neighbours: their sums are zero)."""
+    members = pairs.members
+    n_rows = pairs.n_rows
+    take = jnp.minimum(members, n_rows - 1)
+    rows_m = tree_map(lambda q: q[take], rows)
+    inner = PairList(
+        pairs.idx, pairs.transpose, members.shape[0], pairs.n_cols, None, pairs.transpose_members
+    )
+    out = pair_sum(
+        f, rows_m, cols, inner, geometry, shared, weight=weight, adjoint=adjoint, block=block
+    )
+    return tree_map(
+        lambda o: jnp.zeros((n_rows,) + o.shape[1:], o.dtype).at[members].add(o, mode="drop"),
+        out,
+    )

@@ -30,7 +30,9 @@ from jax.ad_checkpoint import checkpoint_name
 from sphjax.core.neighbors import (
     NeighborSearch,
     capacity,
+    compact_rows,
     measured_capacity,
+    measured_members,
     reference_neighbors,
     split_list,
 )
@@ -44,6 +46,9 @@ from sphjax.physics.pairs import Geometry, PairList
 from sphjax.physics.solid.system import SolidSystem, update_solid
 
 NEIGHBOR_IDX = "sphjax_neighbor_idx"
+#: name of the per-particle fields of the update stage (density, pressure) that reverse
+#: mode keeps instead of recomputing their pair sums (see ``sphjax.simulate``)
+UPDATE_FIELDS = "sphjax_update_fields"
 
 
 # ---------------------------------------------------------------------------- layout
@@ -86,7 +91,7 @@ def neighbor_pairs(model) -> tuple[tuple[int, int], ...]:
 # ---------------------------------------------------------------------------- neighbours
 
 
-@pytree_dataclass(static=("blocks", "union", "capacities"))
+@pytree_dataclass(static=("blocks", "union", "capacities", "member_capacities"))
 class Neighbors:
     """Neighbour data of one simulation.
 
@@ -98,6 +103,9 @@ class Neighbors:
       blocks: each system's ``(start, stop)`` in the State.
       union: ``(start, stop)`` of the particles in ``search``.
       capacities: ``((i, j), width)`` of each split list.
+      member_capacities: ``((i, j), M)`` for the lists whose rows are compacted to the
+        ``M`` particles of system ``i`` that have neighbours in system ``j`` at all (a
+        fluid against its walls: :attr:`PairList.members`).
     """
 
     search: object
@@ -106,6 +114,11 @@ class Neighbors:
     blocks: tuple
     union: tuple | None
     capacities: tuple
+    member_capacities: tuple = ()
+
+
+#: compact a list's rows when at most this fraction of them has neighbours
+_COMPACT_BELOW = 0.6
 
 
 _SEARCHES: dict = {}
@@ -127,8 +140,17 @@ def _local(block, union):
     return (block[0] - union[0], block[1] - union[0])
 
 
-def build_neighbors(state: State, model, extra_capacity: int = 0) -> Neighbors:
-    """Allocate neighbour data for concrete ``state`` (outside ``jit``)."""
+def build_neighbors(
+    state: State, model, extra_capacity: int = 0, compact_rows: bool = False
+) -> Neighbors:
+    """Allocate neighbour data for concrete ``state`` (outside ``jit``).
+
+    ``compact_rows``: a list whose rows mostly have no neighbours (a fluid against its
+    walls) covers only the rows that do (:attr:`PairList.members`), sized from their
+    count now; when more rows gain neighbours the list overflows, which the chunked
+    driver answers by re-allocating, but a traced run (``grad``, ``jit``) cannot, so
+    only the chunked driver asks for it.
+    """
     blocks = system_blocks(state.kind, model)
     wanted = neighbor_pairs(model)
     current = [i for i in _current(model) if blocks[i][1] > blocks[i][0]]
@@ -148,6 +170,18 @@ def build_neighbors(state: State, model, extra_capacity: int = 0) -> Neighbors:
                     extra_capacity,
                 )
                 capacities.append(((i, j), min(width, capacity(search))))
+    member_capacities = []
+    for (i, j), _ in capacities if compact_rows else ():
+        if i < j:
+            members = measured_members(
+                search.idx,
+                _local(blocks[i], union),
+                _local(blocks[j], union),
+                model.neighbor_capacity,
+                extra_capacity,
+            )
+            if members < _COMPACT_BELOW * _size(blocks[i]):
+                member_capacities.append(((i, j), members))
     neighbors = Neighbors(
         search=search,
         pairs={},
@@ -155,6 +189,7 @@ def build_neighbors(state: State, model, extra_capacity: int = 0) -> Neighbors:
         blocks=blocks,
         union=union,
         capacities=tuple(capacities),
+        member_capacities=tuple(member_capacities),
     )
     pair_lists = _split(neighbors, model)
     for i, j in wanted:
@@ -178,6 +213,7 @@ def _split(neighbors: Neighbors, model) -> dict:
     blocks, union = neighbors.blocks, neighbors.union
     widths = dict(neighbors.capacities)
     idx = neighbors.search.idx
+    members = dict(neighbors.member_capacities)
     out = {}
     for i, j in neighbor_pairs(model):
         if (i, j) in widths:
@@ -188,7 +224,14 @@ def _split(neighbors: Neighbors, model) -> dict:
             backward, _ = split_list(
                 idx, _local(blocks[j], union), _local(blocks[i], union), widths[(j, i)]
             )
-            out[(i, j)] = PairList(forward, backward, n_i, n_j)
+            if (i, j) in members:
+                rows, forward, position, _ = compact_rows(forward, n_j, members[(i, j)])
+                out[(i, j)] = PairList(forward, position[backward], n_i, n_j, members=rows)
+            elif (j, i) in members:
+                rows, backward, position, _ = compact_rows(backward, n_i, members[(j, i)])
+                out[(i, j)] = PairList(forward, backward, n_i, n_j, transpose_members=rows)
+            else:
+                out[(i, j)] = PairList(forward, backward, n_i, n_j)
         elif i == j and model.systems[i].current_configuration and blocks[i][1] > blocks[i][0]:
             n = blocks[i][1] - blocks[i][0]
             out[(i, j)] = PairList(idx.astype(jnp.int32), None, n, n)
@@ -204,12 +247,14 @@ def _split_overflow(neighbors: Neighbors, model):
         return jnp.asarray(False)
     blocks, union = neighbors.blocks, neighbors.union
     flags = [jnp.asarray(False)]
+    members = dict(neighbors.member_capacities)
     for (i, j), width in neighbors.capacities:
-        flags.append(
-            split_list(
-                neighbors.search.idx, _local(blocks[i], union), _local(blocks[j], union), width
-            )[1]
+        lst, overflow = split_list(
+            neighbors.search.idx, _local(blocks[i], union), _local(blocks[j], union), width
         )
+        flags.append(overflow)
+        if (i, j) in members:
+            flags.append(compact_rows(lst, _size(blocks[j]), members[(i, j)])[3])
     return jnp.any(jnp.stack(flags))
 
 
@@ -340,7 +385,15 @@ def update_stage(state: State, neighbors: Neighbors, model, params, density_step
     for i, system in enumerate(model.systems):
         if isinstance(system, SolidSystem) and _size(blocks[i]):
             views[i] = update_solid(system, views[i], neighbors.pairs[(i, i)], ctx)
-    return views
+    return [_named(view) for view in views]
+
+
+def _named(view):
+    """The update stage's per-particle outputs, named for the checkpoint policy."""
+    return {
+        k: checkpoint_name(v, UPDATE_FIELDS) if k in ("rho", "p", "v_viscous", "PL0", "F") else v
+        for k, v in view.items()
+    }
 
 
 def interaction_stage(views, neighbors: Neighbors, model, ctx):

@@ -16,14 +16,16 @@ import dataclasses
 
 import jax.numpy as jnp
 
+from sphjax.core.space import scale
+
 
 def extrapolation_terms(pair, pressure_f, density_f, velocity_f):
     """Per wall-fluid pair: ``W_wf``, ``p_f W_wf``, ``rho_f r_wf W_wf`` and ``v_f W_wf``."""
     return {
         "weight": pair.w,
         "pressure": pressure_f * pair.w,
-        "rho_r": (density_f * pair.w)[..., None] * pair.dr,
-        "velocity": pair.w[..., None] * velocity_f,
+        "rho_r": scale(density_f * pair.w, pair.dr),
+        "velocity": scale(pair.w, velocity_f),
     }
 
 

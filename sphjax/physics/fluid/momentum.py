@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import dataclasses
 
-from sphjax.core.space import dot
+from sphjax.core.space import dot, scale
 
 
 def pressure_acceleration(pair, mass_b, pressure_a, density_a, pressure_b, density_b, pi_ab=0.0):
@@ -13,7 +13,7 @@ def pressure_acceleration(pair, mass_b, pressure_a, density_a, pressure_b, densi
     ``- m_b (p_a / rho_a^2 + p_b / rho_b^2 + Pi_ab) grad_a W_ab``.
     """
     term = pressure_a / density_a**2 + pressure_b / density_b**2 + pi_ab
-    return -(mass_b * term)[..., None] * pair.grad_w
+    return scale(-(mass_b * term), pair.grad_w)
 
 
 def transport_stress_acceleration(pair, mass_b, density_a, density_b, v_a, v_b, dv_a, dv_b):
@@ -22,10 +22,10 @@ def transport_stress_acceleration(pair, mass_b, density_a, density_b, v_a, v_b, 
     ``m_b (A_a / rho_a^2 + A_b / rho_b^2) . grad_a W_ab`` with ``A = rho v (v~ - v)^T``,
     i.e. ``A / rho^2 . grad W = v ((v~ - v) . grad W) / rho``.
     """
-    flux_a = v_a * dot(dv_a, pair.grad_w)[..., None]
-    flux_b = v_b * dot(dv_b, pair.grad_w)[..., None]
-    term = flux_a / density_a[..., None] + flux_b / density_b[..., None]
-    return mass_b[..., None] * term
+    flux_a = scale(dot(dv_a, pair.grad_w), v_a)
+    flux_b = scale(dot(dv_b, pair.grad_w), v_b)
+    term = scale(1.0 / density_a, flux_a) + scale(1.0 / density_b, flux_b)
+    return scale(mass_b, term)
 
 
 @dataclasses.dataclass(frozen=True)

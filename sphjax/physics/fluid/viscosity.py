@@ -13,7 +13,7 @@ import dataclasses
 
 import jax.numpy as jnp
 
-from sphjax.core.space import dot
+from sphjax.core.space import dot, scale
 
 ETA2 = 0.01  # regularisation eta^2 = 0.01 h^2 in the pair denominators
 
@@ -38,7 +38,7 @@ def morris_acceleration(pair, v_ab, mass_b, density_a, density_b, nu, h):
     """
     coefficient = mass_b * nu * (density_a + density_b) / (density_a * density_b)
     factor = coefficient * dot(pair.dr, pair.grad_w) / (pair.r**2 + ETA2 * h**2)
-    return factor[..., None] * v_ab
+    return scale(factor, v_ab)
 
 
 @dataclasses.dataclass(frozen=True)
