@@ -658,8 +658,9 @@ def build_setup(s: dict) -> Case:
 
 
 def _model_domain(s, x, dx, gravity) -> Domain:
-    """The ``[domain]`` of the file, checked to hold every particle; by default the box of
-    the particles' cells padded by 2 dx, and against gravity by the box's height too."""
+    """The ``[domain]`` of the file, checked to hold every particle.  By default the box of
+    the particles' cells padded by 2 dx: with a fluid, also against gravity by the box's
+    height (room for splashes); a solid alone, by the box's largest side on every side."""
     if s["domain"] is not None:
         d = s["domain"]
         lower, upper = np.array(d["lower"]), np.array(d["upper"])
@@ -676,7 +677,10 @@ def _model_domain(s, x, dx, gravity) -> Domain:
         return Domain(tuple(d["lower"]), tuple(d["upper"]), tuple(d["periodic"]))
     lower = x.min(axis=0) - 0.5 * dx - 2 * dx
     upper = x.max(axis=0) + 0.5 * dx + 2 * dx
-    if np.any(gravity):
+    if s["fluid"] is None:  # a solid bends and swings: room of its own size on every side
+        reach = float(np.max(upper - lower))
+        lower, upper = lower - reach, upper + reach
+    elif np.any(gravity):
         axis = int(np.argmax(np.abs(gravity)))
         height = upper[axis] - lower[axis]
         if gravity[axis] < 0:
