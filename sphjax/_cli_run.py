@@ -101,12 +101,19 @@ def build_setup_case(args):
         if given:
             fix = "set dx in the file or pass --dx" if flag == "--n" else "edit the file"
             raise UsageError(flag, f"applies to the named cases; for a set-up file {fix}")
+    if not Path(args.case).is_file():
+        raise UsageError(
+            "CASE",
+            f"'{args.case}' does not exist; give the path of a set-up file FILE.toml, or a "
+            "case name (see `sphjax cases`)",
+        )
     try:
         return from_toml(args.case, dx=args.dx, t_end=args.t_end)
     except SetupError as err:
-        argument = "--dx" if err.key == "dx" and args.dx is not None else args.case
-        argument = "--t-end" if err.key == "t_end" else argument
-        raise UsageError(argument, str(err).removeprefix("dx: ")) from None
+        if err.key in ("dx", "t_end") and getattr(args, err.key) is not None:  # from here
+            argument = "--dx" if err.key == "dx" else "--t-end"
+            raise UsageError(argument, str(err).removeprefix(f"{err.key}: ")) from None
+        raise UsageError(args.case, str(err)) from None
 
 
 def apply_sets(case, sets: list[tuple[str, float | tuple]]):

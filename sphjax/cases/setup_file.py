@@ -69,6 +69,10 @@ SHAPE_KEYS = {
 SHAPE_DIM = {"rectangle": 2, "circle": 2, "polygon": 2, "box": 3, "sphere": 3, "cylinder": 3}
 SHAPE_DIM["stl"] = 3
 WALL_SIDES = ("outside", "inside", "fill")
+TOP_KEYS = (
+    "name", "dim", "dx", "kernel", "h_factor", "gravity", "lattice_origin",
+    "time", "fluid", "walls", "solid", "domain",
+)  # fmt: skip
 
 
 class _Table:
@@ -86,6 +90,10 @@ class _Table:
         self.known.append(name)
         if name not in self.table:
             if default is _REQUIRED:
+                # a misspelt key is the likelier mistake than a forgotten one
+                others = [k for k in self.table if k not in self.known]
+                for close in difflib.get_close_matches(name, others, n=1, cutoff=0.6):
+                    raise SetupError(self.key(close), f"unknown key; did you mean '{name}'?")
                 hint = how.get("hint", "")
                 raise SetupError(self.key(name), f"missing; add it{hint}")
             return default
@@ -255,6 +263,9 @@ def read_setup(path) -> dict:
         raise SetupError(None, f"cannot read '{path}': {err}") from None
     folder = path.parent
     top = _Table(raw, "")
+    top.known = list(TOP_KEYS)
+    top.done()  # a misspelt section is reported before what it lacks
+    top.known = []
     s = dict(path=str(path))
     s["name"] = top.get("name", "string", path.stem)
     s["dim"] = top.get("dim", "number", integer=True, hint=" (dim = 2 or dim = 3)")
@@ -289,6 +300,8 @@ def read_setup(path) -> dict:
     s["solid"] = _solid(raw["solid"], dim, folder) if "solid" in raw else None
     s["domain"] = _domain(raw["domain"], dim) if "domain" in raw else None
     top.done()
+    if s["walls"] is not None and s["fluid"] is None:
+        raise SetupError("walls", "walls act on a fluid only; add a [fluid] section or remove it")
     if s["fluid"] is None and s["solid"] is None:
         raise SetupError(None, "the file describes no body; add a [fluid] or a [solid] section")
     if s["fluid"] is not None and s["solid"] is not None:
@@ -297,8 +310,6 @@ def read_setup(path) -> dict:
             "a fluid and a solid in one set-up need a fluid-solid coupling, which sphjax does "
             "not have yet; describe them in separate files",
         )
-    if s["walls"] is not None and s["fluid"] is None:
-        raise SetupError("walls", "walls act on a fluid only; add a [fluid] section or remove it")
     return s
 
 
