@@ -5,6 +5,8 @@ naming the key.  About 40 s on two loaded cores (three small compilations)."""
 from __future__ import annotations
 
 import math
+import re
+import shutil
 from pathlib import Path
 
 import numpy as np
@@ -85,18 +87,6 @@ def test_toml_dam_break_is_the_built_in_one(tmp_path):
     assert np.array_equal(
         np.asarray(ours.state_for(params).density), np.asarray(theirs.state_for(params).density)
     )
-
-
-def test_example_dam_break_runs(tmp_path, capsys):
-    out = tmp_path / "dam.h5"
-    argv = ["run", str(EXAMPLES / "dam_break.toml"), "--dx", "0.05", "--t-end", "0.004"]
-    assert main([*argv, "--quiet", "--out", str(out)]) == 0  # one block: one compilation
-    trajectory, meta = read_trajectory(out)
-    assert meta["case"] == "dam_break_toml" and meta["complete"]
-    assert meta["case_info"]["n_fluid"] == 6 * 12  # the 0.3 x 0.6 column at dx = 0.05
-    assert len(trajectory) >= 2 and np.all(np.isfinite(np.asarray(trajectory.states.position)))
-    assert out.with_suffix(".xdmf").is_file()
-    assert "dam_break_toml: " in capsys.readouterr().err
 
 
 def test_example_cantilever_falls_freely_at_first(tmp_path):
@@ -452,3 +442,20 @@ def test_errors_name_the_key_in_python(tmp_path):
     assert err.value.key == "fluid.sound_speed"
     with pytest.raises(SetupError, match="^dx: must be a positive number"):
         from_toml(_write(tmp_path, "ok.toml", BASE), dx=0.0)
+
+
+def test_example_dam_break_runs_as_the_docs_show(tmp_path, monkeypatch, capsys):
+    # the Python blocks of docs/setups.md: examples/dam_break.toml at dx = 0.05, 10 steps
+    shutil.copytree(EXAMPLES, tmp_path / "examples")
+    monkeypatch.chdir(tmp_path)
+    page = EXAMPLES.parent / "docs" / "setups.md"
+    blocks = re.findall(r"```python\n(.*?)```", page.read_text(), flags=re.S)
+    assert len(blocks) == 2
+    names = {"__name__": "docs"}
+    for block in blocks:
+        exec(compile(block, "setups.md", "exec"), names)
+    assert capsys.readouterr().out.split() == ["270", "3", "800", "0.000225"]
+    case, trajectory = names["case"], names["trajectory"]
+    assert case.name == "dam_break_toml" and case.info["n_fluid"] == 6 * 12  # 0.3 x 0.6 m
+    positions = np.asarray(trajectory.states.position)
+    assert np.all(np.isfinite(positions)) and not np.array_equal(positions[0], positions[-1])
