@@ -236,8 +236,8 @@ def run_case(args, out: Path) -> int:
         case = build_setup_case(args)
         if save_every is None and save_dt is None:  # the file's saving, unless given here
             save_every, save_dt = case.info["save_every"], case.info["save_dt"]
-        if dt is None and case.info["dt_given"]:
-            dt = case.dt
+        # the file's time.dt (checked when the case was built) is the case's step: like a
+        # case's own step it is shortened to fit save_dt or a stiffer --set, never lengthened
     else:
         case = build_case(args.case, dict(args.case_arg), n=args.n, dx=args.dx, t_end=args.t_end)
     case = apply_sets(case, args.set)

@@ -103,6 +103,17 @@ def test_example_cantilever_falls_freely_at_first(tmp_path):
     tip = (kind == sphjax.Kind.SOLID) & (x0[:, 0] > x0[:, 0].max() - 1e-9)
     fall = x1[tip, 1].mean() - x0[tip, 1].mean()
     assert fall == pytest.approx(-0.5 * 2.0 * t**2, rel=0.05)
+    assert np.allclose(trajectory.times, [0.0, 0.01])  # the file's save_dt = 0.01
+
+
+def test_the_files_time_step_and_saving_are_used(tmp_path):
+    text = _edit("t_end = 0.1", "t_end = 0.1\ndt = 1e-4\nsave_every = 2", SOLID)
+    path = _write(tmp_path, "s.toml", text)
+    out = tmp_path / "s.h5"
+    assert main(["run", str(path), "--t-end", "0.0005", "--quiet", "--out", str(out)]) == 0
+    trajectory, meta = read_trajectory(out)
+    assert meta["dt"] == 1e-4 and meta["n_steps"] == 5 and meta["save_every"] == 2
+    assert np.allclose(trajectory.times, np.array([0, 2, 4, 5]) * 1e-4)
 
 
 def _write(tmp_path, name, text):
