@@ -122,48 +122,10 @@ def _write(tmp_path, name, text):
     return path
 
 
-def test_every_primitive_in_a_2d_file(tmp_path):
-    # a pool with a circular obstacle (walls inside its surface), a polygon ramp (filled
-    # wall), a drop above the pool, in a closed tank
-    path = _write(
-        tmp_path,
-        "pool.toml",
-        """
-dim = 2
-dx = 0.02
-gravity = [0.0, -9.81]
-[time]
-t_end = 0.1
-[fluid]
-density = 1000.0
-sound_speed = 30.0
-hydrostatic = true
-[[fluid.shapes]]
-shape = "rectangle"
-lower = [0.0, 0.0]
-upper = [1.0, 0.4]
-[[fluid.shapes]]
-shape = "circle"
-centre = [0.5, 0.7]
-radius = 0.1
-velocity = [0.0, -1.0]
-[walls]
-layers = 3
-[[walls.shapes]]
-shape = "rectangle"
-lower = [0.0, 0.0]
-upper = [1.0, 1.0]
-[[walls.shapes]]
-shape = "circle"
-centre = [0.3, 0.2]
-radius = 0.08
-side = "inside"
-[[walls.shapes]]
-shape = "polygon"
-vertices = [[0.7, 0.0], [1.0, 0.0], [1.0, 0.15]]
-side = "fill"
-""",
-    )
+def test_every_2d_primitive_in_the_drop_example():
+    # examples/drop_in_pool.toml (built, not run): a pool with a circular obstacle (walls
+    # inside its surface), a polygon ramp (filled wall), a drop above it, a closed tank
+    path = EXAMPLES / "drop_in_pool.toml"
     case = from_toml(path)
     dx = 0.02
     pool = geometry.fill(geometry.rectangle([0, 0], [1, 0.4]), dx).position
