@@ -1,6 +1,7 @@
 """Set-up files (``sphjax run FILE.toml``): the TOML dam break is the built-in dam break bit
 for bit, the example files run, every primitive can be used, bad files exit 2 with one line
-naming the key.  About 40 s on two loaded cores (three small compilations)."""
+naming the key.  About 30 s of CPU (three small compilations); 65 s wall on two cores
+at load 10."""
 
 from __future__ import annotations
 

@@ -66,8 +66,7 @@ SHAPE_KEYS = {
     "polygon": ("vertices",),
     "stl": ("file", "scale", "translate"),
 }
-SHAPE_DIM = {"rectangle": 2, "circle": 2, "polygon": 2, "box": 3, "sphere": 3, "cylinder": 3}
-SHAPE_DIM["stl"] = 3
+SHAPE_DIM = dict(rectangle=2, circle=2, polygon=2, box=3, sphere=3, cylinder=3, stl=3)
 WALL_SIDES = ("outside", "inside", "fill")
 TOP_KEYS = (
     "name", "dim", "dx", "kernel", "h_factor", "gravity", "lattice_origin",
