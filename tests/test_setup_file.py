@@ -83,6 +83,12 @@ def test_toml_dam_break_is_the_built_in_one(tmp_path):
     for (name, a), (_, b) in zip(ours.params.items(), theirs.params.items(), strict=True):
         assert np.array_equal(np.asarray(a), np.asarray(b)), name
     assert ours.dt == theirs.dt  # so the runs are the same, bit for bit
+    # examples/dam_break.toml is the default dam break too (it leaves the domain default)
+    example, default = from_toml(EXAMPLES / "dam_break.toml"), sphjax.cases.get("dam_break")
+    assert np.array_equal(np.asarray(example.state.position), np.asarray(default.state.position))
+    assert np.array_equal(np.asarray(example.state.density), np.asarray(default.state.density))
+    assert example.model.systems == default.model.systems and example.dt == default.dt
+    assert example.params.sound_speed == default.params.sound_speed
     # the initial state follows the parameters as the built-in one's does
     params = theirs.params.replace(sound_speed=80.0)
     assert np.array_equal(
