@@ -88,6 +88,34 @@ def build_case(name: str, case_args: dict, *, n=None, dx=None, t_end=None):
     return case
 
 
+def is_setup_file(name: str) -> bool:
+    """Whether ``sphjax run NAME`` names a set-up file rather than a case."""
+    return name.lower().endswith(".toml")
+
+
+def build_setup_case(args):
+    """The case of ``sphjax run FILE.toml`` with ``--dx`` and ``--t-end``."""
+    from sphjax.cases.setup_file import SetupError, from_toml
+
+    for flag, given in (("--n", args.n), ("--case-arg", args.case_arg)):
+        if given:
+            fix = "set dx in the file or pass --dx" if flag == "--n" else "edit the file"
+            raise UsageError(flag, f"applies to the named cases; for a set-up file {fix}")
+    if not Path(args.case).is_file():
+        raise UsageError(
+            "CASE",
+            f"'{args.case}' does not exist; give the path of a set-up file FILE.toml, or a "
+            "case name (see `sphjax cases`)",
+        )
+    try:
+        return from_toml(args.case, dx=args.dx, t_end=args.t_end)
+    except SetupError as err:
+        if err.key in ("dx", "t_end") and getattr(args, err.key) is not None:  # from here
+            argument = "--dx" if err.key == "dx" else "--t-end"
+            raise UsageError(argument, str(err).removeprefix(f"{err.key}: ")) from None
+        raise UsageError(args.case, str(err)) from None
+
+
 def apply_sets(case, sets: list[tuple[str, float | tuple]]):
     """``case`` with ``--set FIELD=VALUE`` applied to its Params.
 
@@ -203,9 +231,17 @@ def run_case(args, out: Path) -> int:
     from sphjax.integration.simulate import NeighborOverflowError, SimulationError, simulate
     from sphjax.io import TrajectoryWriter
 
-    case = build_case(args.case, dict(args.case_arg), n=args.n, dx=args.dx, t_end=args.t_end)
+    dt, save_every, save_dt = args.dt, args.save_every, args.save_dt
+    if is_setup_file(args.case):
+        case = build_setup_case(args)
+        if save_every is None and save_dt is None:  # the file's saving, unless given here
+            save_every, save_dt = case.info["save_every"], case.info["save_dt"]
+        # the file's time.dt (checked when the case was built) is the case's step: like a
+        # case's own step it is shortened to fit save_dt or a stiffer --set, never lengthened
+    else:
+        case = build_case(args.case, dict(args.case_arg), n=args.n, dx=args.dx, t_end=args.t_end)
     case = apply_sets(case, args.set)
-    p = plan(case, dt=args.dt, t_end=args.t_end, save_every=args.save_every, save_dt=args.save_dt)
+    p = plan(case, dt=dt, t_end=args.t_end, save_every=save_every, save_dt=save_dt)
     full = p.n_steps // p.save_every
     chunk = frames_per_chunk(full, p.save_every) * p.save_every
     dx = case.info.get("dx", float("nan"))

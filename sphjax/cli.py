@@ -184,11 +184,16 @@ def _add_run(sub) -> None:
         "run",
         help="run a case and write its trajectory to HDF5 (with an XDMF file for ParaView)",
         description=(
-            "Run a case; frames are appended to --out as the run goes, and an XDMF file "
-            "beside it (same name, .xdmf) opens the time series in ParaView."
+            "Run a case, or the set-up a TOML file describes; frames are appended to --out "
+            "as the run goes, and an XDMF file beside it (same name, .xdmf) opens the time "
+            "series in ParaView."
         ),
     )
-    run.add_argument("case", metavar="CASE", help="case name (see `sphjax cases`)")
+    run.add_argument(
+        "case",
+        metavar="CASE",
+        help="case name (see `sphjax cases`) or a set-up file FILE.toml (see docs/setups.md)",
+    )
     res = run.add_mutually_exclusive_group()
     res.add_argument("--n", type=_positive_int, help="particles across the case's length")
     res.add_argument(

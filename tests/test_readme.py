@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import re
 import shlex
+import shutil
 from pathlib import Path
 
 import pytest
@@ -34,10 +35,13 @@ def test_the_readme_shows_the_commands_it_should():
     assert {"run", "plot", "animate", "export", "cases"} <= shown
     assert ["run", "dam_break", "--dx", "0.02", "--t-end", "0.3", "--save-every", "20",
             "--out", "dam.h5"] in commands  # fmt: skip
+    files = [c[1] for c in commands if c[0] == "run" and c[1].endswith(".toml")]
+    assert files and all((README.parent / f).is_file() for f in files)  # a set-up file
 
 
 @pytest.mark.slow
 def test_every_readme_command_runs(tmp_path, monkeypatch):
+    shutil.copytree(README.parent / "examples", tmp_path / "examples")  # the set-up files
     monkeypatch.chdir(tmp_path)
     for argv in readme_commands(README.read_text()):
         quiet = ["--quiet"] if argv[0] in ("run", "animate") else []

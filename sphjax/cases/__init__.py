@@ -18,6 +18,7 @@ from sphjax.cases.fluid import (
     taylor_green,
     taylor_green_velocity,
 )
+from sphjax.cases.setup_file import SetupError, from_toml
 from sphjax.cases.solid import (
     oscillating_plate,
     plate_mode_shape,
@@ -71,6 +72,8 @@ def get(name: str, *, dx: float | None = None, **kwargs):
 __all__ = [
     "CASES",
     "get",
+    "from_toml",
+    "SetupError",
     "taylor_green",
     "taylor_green_velocity",
     "poiseuille",
