@@ -1,0 +1,163 @@
+"""Run the three-dimensional validation cases; results go to docs/figures/validation_3d.json.
+
+    python docs/scripts/validate_3d.py abc --n 12 16 20
+    python docs/scripts/validate_3d.py abc --n 16 --lattice        # the unrelaxed lattice start
+    python docs/scripts/validate_3d.py tank --n 8 12
+    python docs/scripts/validate_3d.py cantilever --n 4 6 8
+
+Each run is stored in the JSON file under its own key (re-running replaces it) and printed
+as a Markdown table row; docs/validation_3d.md holds the tables.  Float32, as a user runs.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import pathlib
+import time
+
+import numpy as np
+
+import sphjax
+from sphjax import Kind
+from sphjax.cases import abc_velocity, oscillation_stats, tip_displacement
+
+DOCS = pathlib.Path(__file__).resolve().parents[1]
+RESULTS = DOCS / "figures" / "validation_3d.json"
+
+
+def _store(key, record):
+    data = json.loads(RESULTS.read_text()) if RESULTS.exists() else {}
+    data[key] = record
+    RESULTS.parent.mkdir(parents=True, exist_ok=True)
+    RESULTS.write_text(json.dumps(data, indent=1, sort_keys=True))
+
+
+def abc(n, reynolds, t_end, lattice, frames=10):
+    t0 = time.perf_counter()
+    kw = dict(disorder=0.0, relax_iterations=0) if lattice else {}
+    case = sphjax.cases.abc_flow_3d(n=n, reynolds=reynolds, **kw)
+    start = time.perf_counter() - t0
+    n_steps = frames * int(np.ceil(t_end / case.dt / frames))
+    t0 = time.perf_counter()
+    traj = sphjax.simulate(case, n_steps=n_steps, save_every=n_steps // frames, dt=t_end / n_steps)
+    wall = time.perf_counter() - t0
+    t = np.asarray(traj.times)
+    v = np.asarray(traj.states.velocity)
+    m = np.asarray(traj.states.mass)
+    ke = 0.5 * np.sum(m * np.sum(v**2, -1), -1)
+    exact = abc_velocity(np.asarray(traj.states.position), t[:, None], case)
+    error = np.sqrt(np.mean(np.sum((v - exact) ** 2, -1), -1) / np.mean(np.sum(exact**2, -1), -1))
+    ke_exact = np.exp(2 * case.info["decay_rate"] * t)
+    record = dict(
+        n=n,
+        reynolds=reynolds,
+        start="lattice" if lattice else "relaxed",
+        particles=case.n_particles,
+        steps=n_steps,
+        times=t.tolist(),
+        ke_ratio=(ke / ke[0]).tolist(),
+        ke_exact=ke_exact.tolist(),
+        velocity_error=error.tolist(),
+        start_s=start,
+        wall_s=wall,
+    )
+    _store(f"abc_n{n}_re{reynolds:g}_{record['start']}", record)
+    print(
+        f"| {n} | {reynolds:g} | {record['start']} | {ke[-1] / ke[0]:.4f} ({ke_exact[-1]:.4f}) "
+        f"| {ke[-1] / ke[0] / ke_exact[-1] - 1:+.2%} | {np.max(np.diff(ke)) / ke[0]:+.2%} "
+        f"| {error[1]:.2%} | {error.max():.2%} | {start:.0f} | {wall:.0f} |"
+    )
+
+
+def cantilever(n, t_end, save_every=20):
+    t0 = time.perf_counter()
+    case = sphjax.cases.cantilever_3d(n=n)
+    n_steps = save_every * int(np.ceil(t_end / case.dt / save_every))
+    traj = sphjax.simulate(case, n_steps=n_steps, save_every=save_every)
+    wall = time.perf_counter() - t0
+    u = np.asarray(tip_displacement(traj, case))
+    stats = oscillation_stats(np.asarray(traj.times), u[:, 1])
+    info = case.info
+    record = dict(
+        n=n,
+        particles=case.n_particles,
+        steps=n_steps,
+        times=np.asarray(traj.times).tolist(),
+        tip_y=u[:, 1].tolist(),
+        tip_z_max=float(np.abs(u[:, 2]).max()),
+        period=stats["period"],
+        amplitude=stats["amplitude"],
+        mean=stats["mean"],
+        reference_period=info["period"],
+        reference_amplitude=info["tip_amplitude"],
+        wall_s=wall,
+    )
+    _store(f"cantilever_n{n}", record)
+    print(
+        f"| {n} | {case.n_particles} | {n_steps} | {wall:.0f} | {stats['period']:.4f} | "
+        f"{stats['period'] / info['period'] - 1:+.1%} | {stats['amplitude']:.3e} | "
+        f"{stats['amplitude'] / info['tip_amplitude'] - 1:+.1%} |"
+    )
+
+
+def tank(n, width, t_end, frames=10):
+    t0 = time.perf_counter()
+    case = sphjax.cases.hydrostatic_tank_3d(n=n, width=width)
+    n_steps = frames * int(np.ceil(t_end / case.dt / frames))
+    traj = sphjax.simulate(case, n_steps=n_steps, save_every=n_steps // frames)
+    wall = time.perf_counter() - t0
+    info = case.info
+    g, H = info["gravity"], info["height"]
+    fluid = np.asarray(case.state.kind) == Kind.FLUID
+    x = np.asarray(traj.states.position)[:, fluid]
+    p = np.asarray(traj.states.pressure)[:, fluid]
+    bottom = [float(np.polyfit(x[i, :, 2], p[i], 1)[1]) for i in range(len(traj.times))]
+    speed = np.linalg.norm(np.asarray(traj.states.velocity)[:, fluid], axis=-1).max(axis=-1)
+    inside = bool(
+        np.all(x[..., 2] > 0)
+        & np.all((x[..., :2] > 0) & (x[..., :2] < [info["width"], info["depth"]]))
+    )
+    record = dict(
+        n=n,
+        width=info["width"],
+        particles=case.n_particles,
+        fluid=int(fluid.sum()),
+        steps=n_steps,
+        times=np.asarray(traj.times).tolist(),
+        bottom_pressure=bottom,
+        reference=1000.0 * g * H,
+        max_speed=(speed / np.sqrt(g * H)).tolist(),
+        inside=inside,
+        wall_s=wall,
+    )
+    _store(f"tank_n{n}_w{width:g}", record)
+    print(
+        f"| {n} | {info['width']:g} x {info['depth']:g} | {int(fluid.sum())} | {n_steps} | "
+        f"{bottom[-1] / (1000.0 * g * H) - 1:+.2%} | {speed[-1] / np.sqrt(g * H):.2e} | "
+        f"{inside} | {wall:.0f} |"
+    )
+
+
+def main():
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("case", choices=["abc", "tank", "cantilever"])
+    p.add_argument("--n", type=int, nargs="*", default=None)
+    p.add_argument("--reynolds", type=float, default=50.0)
+    p.add_argument("--t-end", type=float, default=None)
+    p.add_argument("--lattice", action="store_true")
+    p.add_argument("--width", type=float, default=1.0)
+    args = p.parse_args()
+    if args.case == "abc":
+        for n in args.n or [12, 16]:
+            abc(n, args.reynolds, args.t_end or 0.5, args.lattice)
+    elif args.case == "tank":
+        for n in args.n or [8, 12]:
+            tank(n, args.width, args.t_end or 1.0)
+    elif args.case == "cantilever":
+        for n in args.n or [4, 6, 8]:
+            cantilever(n, args.t_end or 0.55)
+
+
+if __name__ == "__main__":
+    main()
