@@ -3,6 +3,7 @@
     python docs/scripts/validate_3d.py abc --n 12 16 20
     python docs/scripts/validate_3d.py abc --n 16 --lattice        # the unrelaxed lattice start
     python docs/scripts/validate_3d.py tank --n 8 12
+    python docs/scripts/validate_3d.py duct --n 8 12 16
     python docs/scripts/validate_3d.py cantilever --n 4 6 8
 
 Each run is stored in the JSON file under its own key (re-running replaces it) and printed
@@ -20,7 +21,7 @@ import numpy as np
 
 import sphjax
 from sphjax import Kind
-from sphjax.cases import abc_velocity, oscillation_stats, tip_displacement
+from sphjax.cases import abc_velocity, duct_velocity, oscillation_stats, tip_displacement
 
 DOCS = pathlib.Path(__file__).resolve().parents[1]
 RESULTS = DOCS / "figures" / "validation_3d.json"
@@ -139,9 +140,48 @@ def tank(n, width, t_end, frames=10):
     )
 
 
+def duct(n, t_end, frames=10):
+    t0 = time.perf_counter()
+    case = sphjax.cases.duct_poiseuille_3d(n=n)
+    n_steps = frames * int(np.ceil(t_end / case.dt / frames))
+    traj = sphjax.simulate(case, n_steps=n_steps, save_every=n_steps // frames, dt=t_end / n_steps)
+    wall = time.perf_counter() - t0
+    info = case.info
+    a, b, dx = 0.5 * info["width"], 0.5 * info["height"], info["dx"]
+    fluid = np.asarray(case.state.kind) == Kind.FLUID
+    centre, exact, profile = [], [], []
+    for i in range(1, len(traj.times)):
+        t = float(traj.times[i])
+        x = np.asarray(traj.states.position[i])[fluid]
+        u = np.asarray(traj.states.velocity[i])[fluid, 0]
+        y, z = x[:, 1] - a, x[:, 2] - b
+        ue = duct_velocity(y, z, a, b, info["viscosity"], info["body_force"], t=t)
+        near = (np.abs(y) < 0.6 * dx) & (np.abs(z) < 0.6 * dx)
+        centre.append(float(u[near].mean()))
+        exact.append(float(ue[near].mean()))
+        profile.append(float(np.sqrt(np.mean((u - ue) ** 2)) / info["centre_speed"]))
+    record = dict(
+        n=n,
+        particles=case.n_particles,
+        steps=n_steps,
+        times=np.asarray(traj.times)[1:].tolist(),
+        centre=centre,
+        centre_exact=exact,
+        profile_error=profile,
+        wall_s=wall,
+    )
+    _store(f"duct_n{n}", record)
+    errors = np.array(centre) / np.array(exact) - 1
+    middle = errors[len(errors) // 2]
+    print(
+        f"| {n} | {case.n_particles} | {n_steps} | {errors[0]:+.2%} | {middle:+.2%} "
+        f"| {errors[-1]:+.2%} | {profile[-1]:.2%} | {wall:.0f} |"
+    )
+
+
 def main():
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    p.add_argument("case", choices=["abc", "tank", "cantilever"])
+    p.add_argument("case", choices=["abc", "tank", "duct", "cantilever"])
     p.add_argument("--n", type=int, nargs="*", default=None)
     p.add_argument("--reynolds", type=float, default=50.0)
     p.add_argument("--t-end", type=float, default=None)
@@ -154,6 +194,9 @@ def main():
     elif args.case == "tank":
         for n in args.n or [8, 12]:
             tank(n, args.width, args.t_end or 1.0)
+    elif args.case == "duct":
+        for n in args.n or [8, 12]:
+            duct(n, args.t_end or 0.5)
     elif args.case == "cantilever":
         for n in args.n or [4, 6, 8]:
             cantilever(n, args.t_end or 0.55)

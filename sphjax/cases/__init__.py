@@ -18,7 +18,14 @@ from sphjax.cases.fluid import (
     taylor_green,
     taylor_green_velocity,
 )
-from sphjax.cases.fluid3d import abc_flow_3d, abc_pressure, abc_velocity, hydrostatic_tank_3d
+from sphjax.cases.fluid3d import (
+    abc_flow_3d,
+    abc_pressure,
+    abc_velocity,
+    duct_poiseuille_3d,
+    duct_velocity,
+    hydrostatic_tank_3d,
+)
 from sphjax.cases.solid import (
     oscillating_plate,
     plate_mode_shape,
@@ -44,6 +51,7 @@ CASES = {
     "abc_flow_3d": abc_flow_3d,
     "hydrostatic_tank_3d": hydrostatic_tank_3d,
     "cantilever_3d": cantilever_3d,
+    "duct_poiseuille_3d": duct_poiseuille_3d,
 }
 
 
@@ -98,4 +106,6 @@ __all__ = [
     "cantilever_3d",
     "cantilever_reference",
     "beam_angular_frequency",
+    "duct_poiseuille_3d",
+    "duct_velocity",
 ]

@@ -2,7 +2,9 @@
 
 * :func:`abc_flow_3d` — the decaying Arnold-Beltrami-Childress flow in a periodic cube,
   an exact Navier-Stokes solution;
-* :func:`hydrostatic_tank_3d` — a water column at rest in a box, ``p = rho0 g (H - z)``.
+* :func:`hydrostatic_tank_3d` — a water column at rest in a box, ``p = rho0 g (H - z)``;
+* :func:`duct_poiseuille_3d` — body-force-driven flow in a square or rectangular duct with
+  four no-slip walls, periodic along the flow (White's series, :func:`duct_velocity`).
 
 The physics is the two-dimensional cases' (the systems are dimension-generic); only the
 geometry differs.
@@ -15,9 +17,9 @@ import math
 import jax.numpy as jnp
 import numpy as np
 
-from sphjax.cases._geometry import check_positive, check_resolution, lattice
+from sphjax.cases._geometry import check_positive, check_resolution, lattice, wall_layers
 from sphjax.cases._packing import periodic_neighbours, relax_periodic, summation_masses
-from sphjax.cases._systems import fluid_system
+from sphjax.cases._systems import fluid_system, wall_system
 from sphjax.cases.fluid import _finish, _relax_iterations, _tank
 from sphjax.core.case import Case
 from sphjax.core.kernels import WendlandC2, as_kernel
@@ -240,4 +242,126 @@ def hydrostatic_tank_3d(
     )
 
 
-__all__ = ["abc_flow_3d", "abc_velocity", "abc_pressure", "hydrostatic_tank_3d"]
+def duct_velocity(y, z, half_width, half_height, viscosity, body_force, t=None, terms=100):
+    """Velocity ``u(y, z)`` along a duct ``|y| <= a``, ``|z| <= b`` driven by a body force
+    ``F`` (numpy; ``y``, ``z`` from the duct's axis).
+
+    Steady (``t=None``), White (*Viscous Fluid Flow*, eq. 3-48):
+
+        u = 16 a^2 F / (nu pi^3) sum_{i = 1, 3, 5, ...} (-1)^((i-1)/2)
+            [1 - cosh(i pi z / (2a)) / cosh(i pi b / (2a))] cos(i pi y / (2a)) / i^3.
+
+    Start-up from rest at time ``t``, the double sine series over the modes of the
+    duct (``Y = y + a``, ``Z = z + b``, ``W = 2a``, ``D = 2b``):
+
+        u = sum_{m, n odd} 16 F / (pi^2 m n nu lambda_mn) (1 - exp(-nu lambda_mn t))
+            sin(m pi Y / W) sin(n pi Z / D),   lambda_mn = pi^2 (m^2 / W^2 + n^2 / D^2).
+    """
+    a, b, nu, F = half_width, half_height, viscosity, body_force
+    y, z = np.asarray(y, float), np.asarray(z, float)
+    if t is None:
+        u = np.zeros(np.broadcast(y, z).shape)
+        for i in range(1, 2 * terms, 2):
+            sign = (-1.0) ** ((i - 1) // 2)
+            # cosh(i pi z / 2a) / cosh(i pi b / 2a), written to stay finite for large i
+            ratio = np.exp(i * np.pi * (np.abs(z) - b) / (2 * a)) * (
+                (1 + np.exp(-i * np.pi * np.abs(z) / a)) / (1 + np.exp(-i * np.pi * b / a))
+            )
+            u += sign * (1 - ratio) * np.cos(i * np.pi * y / (2 * a)) / i**3
+        return 16 * a**2 * F / (nu * np.pi**3) * u
+    W, D = 2 * a, 2 * b
+    m = np.arange(1, 2 * terms, 2)[:, None]
+    n = np.arange(1, 2 * terms, 2)[None, :]
+    lam = np.pi**2 * (m**2 / W**2 + n**2 / D**2)
+    coefficient = 16 * F / (np.pi**2 * m * n * nu * lam) * (1 - np.exp(-nu * lam * t))
+    Y, Z = (y + a)[..., None, None], (z + b)[..., None, None]
+    modes = np.sin(m * np.pi * Y / W) * np.sin(n * np.pi * Z / D)
+    return np.sum(coefficient * modes, axis=(-2, -1))
+
+
+def duct_poiseuille_3d(
+    n: int = 10,
+    width: float = 1.0e-3,
+    height: float | None = None,
+    viscosity: float = 1.0e-6,
+    body_force: float = 2.0e-4,
+    sound_speed_factor: float = 20.0,
+    kernel="quintic_spline",
+    t_end: float = 0.5,
+) -> Case:
+    """Body-force-driven flow along x in a duct ``[0, width] x [0, height]`` in (y, z) with
+    four no-slip walls, periodic along x; starts from rest.
+
+    The three-dimensional :func:`sphjax.cases.poiseuille` (Morris, Fox & Zhu 1997: the
+    same fluid, ``nu = 1e-6``, ``F = 2e-4``, quintic spline with ``h = dx``, summation
+    density, Morris viscosity, Adami no-slip dummy walls, ``c0 = 20 u_max``).  The steady
+    profile is White's series and the start-up the duct's double sine series
+    (:func:`duct_velocity`); ``info["centre_speed"]`` is the steady speed on the axis.
+
+    Args:
+      n: particles across the width (``dx = width / n``).
+      height: the duct's extent along z (default ``width``: a square duct), rounded to
+        whole particle spacings.
+    """
+    n = check_resolution("n", n, 4)
+    Wy = check_positive("width", width)
+    Dz = Wy if height is None else check_positive("height", height)
+    nu = check_positive("viscosity", viscosity)
+    F = check_positive("body_force", body_force)
+    dx = Wy / n
+    Dz = dx * max(1, round(Dz / dx))
+    kernel = as_kernel(kernel)
+    h = dx
+    cutoff = kernel.support * h
+    layers = wall_layers(cutoff, dx)
+    # periodic length: at least twice the neighbour-search radius (cutoff and skin)
+    length = dx * max(4, math.ceil(2.5 * cutoff / dx))
+    fluid = lattice([0.0, 0.0, 0.0], [length, Wy, Dz], dx)
+    pad = layers * dx
+    shell = lattice([0.0, -pad, -pad], [length, Wy + pad, Dz + pad], dx)
+    inside = (shell[:, 1] > 0) & (shell[:, 1] < Wy) & (shell[:, 2] > 0) & (shell[:, 2] < Dz)
+    walls = shell[~inside]
+    x = np.concatenate([fluid, walls])
+    kind = np.concatenate([np.full(len(fluid), Kind.FLUID), np.full(len(walls), Kind.WALL)])
+    rho0 = 1000.0
+    a, b = 0.5 * Wy, 0.5 * Dz
+    u_centre = float(duct_velocity(0.0, 0.0, a, b, nu, F))
+    c0 = sound_speed_factor * u_centre
+    params = make_params(
+        3, reference_density=rho0, sound_speed=c0, kinematic_viscosity=nu, gravity=(F, 0.0, 0.0)
+    )
+    margin = (layers + 2) * dx
+    model = Model(
+        dim=3,
+        smoothing_length=h,
+        kernel=kernel,
+        domain=Domain(
+            (0.0, -margin, -margin), (length, Wy + margin, Dz + margin), (True, False, False)
+        ),
+        systems=(
+            fluid_system(density="summation", gamma=1.0, physical_viscosity=True),
+            wall_system("no_slip"),
+        ),
+    )
+    state = make_state(x, 0.0, rho0, rho0 * dx**3, kind)
+    info = dict(
+        dx=dx,
+        n=n,
+        width=Wy,
+        height=Dz,
+        length=length,
+        viscosity=nu,
+        body_force=F,
+        centre_speed=u_centre,
+    )
+    return _finish("duct_poiseuille_3d", state, model, params, t_end, info)
+
+
+__all__ = [
+    "abc_flow_3d",
+    "abc_velocity",
+    "abc_pressure",
+    "hydrostatic_tank_3d",
+    "duct_poiseuille_3d",
+    "duct_velocity",
+]
