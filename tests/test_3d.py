@@ -42,6 +42,32 @@ def _rms(a):
     return float(np.sqrt(np.mean(np.square(a))))
 
 
+@pytest.mark.parametrize(
+    "name, n",
+    [
+        ("abc_flow_3d", 8),
+        ("hydrostatic_tank_3d", 4),
+        ("cantilever_3d", 4),
+        ("duct_poiseuille_3d", 4),
+    ],
+)
+def test_3d_cases_are_registered_and_three_dimensional(name, n):
+    case = sphjax.cases.get(name, n=n)
+    assert name in sphjax.cases.CASES and case.name == name
+    assert case.model.dim == 3 and case.model.domain.dim == 3
+    assert case.state.position.shape == (case.n_particles, 3)
+    assert case.params.gravity.shape == (3,)
+    assert case.info["n"] == n
+    assert sphjax.cases.get(name, dx=case.info["dx"]).info["n"] == n
+
+
+def test_abc_flow_needs_the_kernel_support_under_half_the_box():
+    with pytest.raises(ValueError, match=r"^n must be an integer >= 8"):
+        sphjax.cases.abc_flow_3d(n=7)
+    with pytest.raises(ValueError, match=r"dx=0.2 is too coarse.*use dx <= 0.125"):
+        sphjax.cases.get("abc_flow_3d", dx=0.2)
+
+
 @pytest.mark.slow
 def test_abc_flow_kinetic_energy_and_velocity_field():
     """ABC flow, Re = 50, 10^3 particles, to t = 0.3 (about 30 s).

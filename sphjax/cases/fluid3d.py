@@ -104,11 +104,15 @@ def abc_flow_3d(
     exact pressure and masses for which summation density reproduces it.
 
     Args:
-      n: particles per side (``dx = L / n``).
+      n: particles per side (``dx = L / n``); at least 8 with the default kernel, so
+        that the kernel support stays under half the box.
       reynolds: ``Re = U L / nu`` (the flow is unstable at large Re: keep it 10-100).
       relax_iterations: pseudo-time steps of the packing (0: no packing, lattice masses).
     """
-    n = check_resolution("n", n, 4)
+    kernel = as_kernel(kernel)
+    check_positive("h_factor", h_factor)
+    # the kernel support must stay under half the box (one periodic image per pair)
+    n = check_resolution("n", n, math.floor(2 * kernel.support * h_factor) + 1)
     check_positive("reynolds", reynolds)
     U = check_positive("speed", speed)
     L = check_positive("length", length)
@@ -116,7 +120,6 @@ def abc_flow_3d(
         raise ValueError(f"disorder must lie in [0, 0.5) (units of dx), got {disorder}")
     relax_iterations = _relax_iterations(relax_iterations)
     dx = L / n
-    kernel = as_kernel(kernel)
     h = h_factor * dx
     x = lattice([0.0] * 3, [L] * 3, dx)
     rng = np.random.default_rng(seed)
@@ -183,6 +186,9 @@ def abc_flow_3d(
     return _finish("abc_flow_3d", state, model, params, t_end, info, initial_state=initial_state)
 
 
+abc_flow_3d.min_n = 8  # the smallest resolution (sphjax.cases._resolution)
+
+
 def hydrostatic_tank_3d(
     n: int = 10,
     height: float = 1.0,
@@ -193,7 +199,9 @@ def hydrostatic_tank_3d(
     artificial_alpha: float = 0.1,
     t_end: float = 1.0,
 ) -> Case:
-    """A water column ``H`` deep at rest in a box ``width x depth``: ``p = rho0 g (H - z)``.
+    """A water column at rest in a 3D tank: ``p = rho0 g (H - z)``.
+
+    The column is ``H`` deep and fills a box ``width x depth``.
 
     The two-dimensional :func:`sphjax.cases.hydrostatic_tank` extruded: Wendland C2 with
     ``h = 1.5 dx``, continuity density with delta-SPH (Molteni & Colagrossi 2009), Tait
@@ -289,8 +297,10 @@ def duct_poiseuille_3d(
     kernel="quintic_spline",
     t_end: float = 0.5,
 ) -> Case:
-    """Body-force-driven flow along x in a duct ``[0, width] x [0, height]`` in (y, z) with
-    four no-slip walls, periodic along x; starts from rest.
+    """Body-force-driven flow in a duct with four no-slip walls (White's series).
+
+    The duct is ``[0, width] x [0, height]`` in (y, z), periodic along the flow (x); the
+    fluid starts from rest.
 
     The three-dimensional :func:`sphjax.cases.poiseuille` (Morris, Fox & Zhu 1997: the
     same fluid, ``nu = 1e-6``, ``F = 2e-4``, quintic spline with ``h = dx``, summation
