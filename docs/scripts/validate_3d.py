@@ -4,6 +4,7 @@
     python docs/scripts/validate_3d.py abc --n 16 --lattice        # the unrelaxed lattice start
     python docs/scripts/validate_3d.py tank --n 8 12
     python docs/scripts/validate_3d.py duct --n 8 12 16
+    python docs/scripts/validate_3d.py dam --n 8                # --t-end in T = t sqrt(2g/L)
     python docs/scripts/validate_3d.py cantilever --n 4 6 8
 
 Each run is stored in the JSON file under its own key (re-running replaces it) and printed
@@ -21,9 +22,30 @@ import numpy as np
 
 import sphjax
 from sphjax import Kind
-from sphjax.cases import abc_velocity, duct_velocity, oscillation_stats, tip_displacement
+from sphjax.cases import (
+    abc_velocity,
+    duct_velocity,
+    oscillation_stats,
+    surge_front,
+    tip_displacement,
+)
 
 DOCS = pathlib.Path(__file__).resolve().parents[1]
+# Martin & Moyce (1952), Table 2 (height 2L), (T, Z/L): the reference of record.
+MARTIN_MOYCE = np.array(
+    [
+        (0.41, 1.11),
+        (0.84, 1.22),
+        (1.19, 1.44),
+        (1.43, 1.67),
+        (1.63, 1.89),
+        (1.83, 2.11),
+        (1.98, 2.33),
+        (2.20, 2.56),
+        (2.32, 2.78),
+        (2.51, 3.00),
+    ]
+)
 RESULTS = DOCS / "figures" / "validation_3d.json"
 
 
@@ -179,9 +201,37 @@ def duct(n, t_end, frames=10):
     )
 
 
+def dam(n, t_scaled):
+    t0 = time.perf_counter()
+    case = sphjax.cases.dam_break_3d(n=n)
+    scale = case.info["time_scale"]
+    save_every = max(1, int(0.05 * scale / case.dt))
+    n_steps = save_every * int(np.ceil(t_scaled * scale / case.dt / save_every))
+    traj = sphjax.simulate(case, n_steps=n_steps, save_every=save_every)
+    wall = time.perf_counter() - t0
+    T = np.asarray(traj.times) / scale
+    Z = np.asarray(surge_front(traj.states, case))
+    reached = MARTIN_MOYCE[MARTIN_MOYCE[:, 0] <= T[-1]]
+    measured = np.interp(reached[:, 0], T, Z)
+    record = dict(
+        n=n,
+        particles=case.n_particles,
+        steps=n_steps,
+        T=T.tolist(),
+        front=Z.tolist(),
+        martin_moyce=reached.tolist(),
+        measured=measured.tolist(),
+        wall_s=wall,
+    )
+    _store(f"dam_n{n}", record)
+    for (t_ref, z_ref), z in zip(reached, measured, strict=True):
+        print(f"| {n} | {t_ref} | {z_ref} | {z:.3f} | {z / z_ref - 1:+.1%} |")
+    print(f"wall {wall:.0f} s, {case.n_particles} particles, {n_steps} steps")
+
+
 def main():
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    p.add_argument("case", choices=["abc", "tank", "duct", "cantilever"])
+    p.add_argument("case", choices=["abc", "tank", "duct", "dam", "cantilever"])
     p.add_argument("--n", type=int, nargs="*", default=None)
     p.add_argument("--reynolds", type=float, default=50.0)
     p.add_argument("--t-end", type=float, default=None)
@@ -194,6 +244,9 @@ def main():
     elif args.case == "tank":
         for n in args.n or [8, 12]:
             tank(n, args.width, args.t_end or 1.0)
+    elif args.case == "dam":
+        for n in args.n or [8]:
+            dam(n, args.t_end or 2.6)
     elif args.case == "duct":
         for n in args.n or [8, 12]:
             duct(n, args.t_end or 0.5)

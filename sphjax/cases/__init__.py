@@ -22,6 +22,7 @@ from sphjax.cases.fluid3d import (
     abc_flow_3d,
     abc_pressure,
     abc_velocity,
+    dam_break_3d,
     duct_poiseuille_3d,
     duct_velocity,
     hydrostatic_tank_3d,
@@ -52,6 +53,7 @@ CASES = {
     "hydrostatic_tank_3d": hydrostatic_tank_3d,
     "cantilever_3d": cantilever_3d,
     "duct_poiseuille_3d": duct_poiseuille_3d,
+    "dam_break_3d": dam_break_3d,
 }
 
 
@@ -108,4 +110,5 @@ __all__ = [
     "beam_angular_frequency",
     "duct_poiseuille_3d",
     "duct_velocity",
+    "dam_break_3d",
 ]

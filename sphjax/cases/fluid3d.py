@@ -3,6 +3,8 @@
 * :func:`abc_flow_3d` — the decaying Arnold-Beltrami-Childress flow in a periodic cube,
   an exact Navier-Stokes solution;
 * :func:`hydrostatic_tank_3d` — a water column at rest in a box, ``p = rho0 g (H - z)``;
+* :func:`dam_break_3d` — the Martin & Moyce (1952) dam break with the column across the
+  whole width of a box tank;
 * :func:`duct_poiseuille_3d` — body-force-driven flow in a square or rectangular duct with
   four no-slip walls, periodic along the flow (White's series, :func:`duct_velocity`).
 
@@ -250,6 +252,80 @@ def hydrostatic_tank_3d(
     )
 
 
+def dam_break_3d(
+    n: int = 8,
+    column_width: float = 0.3,
+    tank_length_factor: float = 5.0,
+    tank_width: float | None = None,
+    gravity: float = 9.81,
+    sound_speed_factor: float = 20.0,
+    artificial_alpha: float = 0.1,
+    density_diffusion: str | None = "molteni",
+    wall_slip: str = "no_slip",
+    t_end: float | None = None,
+) -> Case:
+    """Martin & Moyce (1952) dam break in a 3D box tank, the column across its whole width.
+
+    The two-dimensional :func:`sphjax.cases.dam_break` extruded along y: a column ``L``
+    long and ``2L`` high against the wall ``x = 0`` of a tank ``tank_length_factor * L``
+    long and ``tank_width`` wide (default ``L``), walls on the floor and the four sides;
+    Wendland C2 with ``h = 1.5 dx``, continuity density with delta-SPH, Tait ``gamma = 7``,
+    artificial viscosity, ``c0 = 20 sqrt(g H)``.  The surge front
+    (:func:`sphjax.cases.surge_front`) is compared with the same tables as in 2D, against
+    ``T = t sqrt(2 g / L)``.
+
+    Args:
+      n: particles along the column's length ``L`` (``dx = L / n``).
+      tank_width: the tank's (and the column's) extent along y, rounded to whole spacings.
+    """
+    n = check_resolution("n", n, 4)
+    L = check_positive("column_width", column_width)
+    g = check_positive("gravity", gravity)
+    dx = L / n
+    Wy = L if tank_width is None else check_positive("tank_width", tank_width)
+    Wy = dx * max(1, round(Wy / dx))
+    H = 2.0 * L
+    kernel, h = WendlandC2(), 1.5 * dx
+    rho0 = 1000.0
+    c0 = sound_speed_factor * math.sqrt(g * H)
+    tank_length = dx * round(tank_length_factor * L / dx)
+    fluid = lattice([0.0, 0.0, 0.0], [L, Wy, H], dx)
+    if t_end is None:
+        t_end = 3.0 / math.sqrt(2 * g / L)
+    info = dict(
+        dx=dx,
+        n=n,
+        column_width=L,
+        column_height=H,
+        tank_length=tank_length,
+        tank_width=Wy,
+        gravity=g,
+        time_scale=1.0 / math.sqrt(2 * g / L),
+    )
+    return _tank(
+        "dam_break_3d",
+        fluid,
+        (tank_length, Wy, 1.25 * H),
+        dx,
+        kernel,
+        h,
+        rho0,
+        g,
+        c0,
+        dict(artificial_alpha=artificial_alpha),
+        dict(
+            density="continuity",
+            gamma=7.0,
+            artificial_viscosity=True,
+            density_diffusion=density_diffusion,
+        ),
+        wall_slip,
+        t_end,
+        info,
+        H,
+    )
+
+
 def duct_velocity(y, z, half_width, half_height, viscosity, body_force, t=None, terms=100):
     """Velocity ``u(y, z)`` along a duct ``|y| <= a``, ``|z| <= b`` driven by a body force
     ``F`` (numpy; ``y``, ``z`` from the duct's axis).
@@ -374,4 +450,5 @@ __all__ = [
     "hydrostatic_tank_3d",
     "duct_poiseuille_3d",
     "duct_velocity",
+    "dam_break_3d",
 ]
