@@ -301,3 +301,62 @@ def test_cantilever_3d_tip_gradient_wrt_young_modulus():
     assert grad != 0.0
     assert abs(grad / fd - 1) <= 1e-5
     assert abs(tangent / grad - 1) <= 1e-8
+
+
+def test_plot_slice_of_a_3d_trajectory(tmp_path, capsys):
+    """``sphjax plot --slice z=0``: only the particles within one kernel support of the
+    plane are drawn, in x and y; a bad slice gets one line naming --slice (exit 2)."""
+    from sphjax.cli import main
+    from sphjax.io import read_trajectory
+    from sphjax.plot import FramePlot, parse_slice
+
+    case = sphjax.cases.cantilever_3d(n=2)
+    path = tmp_path / "beam.h5"
+    with sphjax.TrajectoryWriter(path, case) as writer:
+        sphjax.simulate(case, n_steps=2, save_every=1, on_frames=writer)
+    assert main(["plot", str(path), "--slice", "z=0.005", "--out", str(tmp_path / "s.png")]) == 0
+    assert (tmp_path / "s.png").stat().st_size > 0
+    assert (
+        main(
+            [
+                "plot",
+                str(path),
+                "--slice",
+                "y=0",
+                "--field",
+                "kind",
+                "--out",
+                str(tmp_path / "k.png"),
+            ]
+        )
+        == 0
+    )
+
+    trajectory, meta = read_trajectory(path, frames=-1)
+    x = np.asarray(trajectory.states.position)[0]
+    support = case.model.cutoff
+    z = 0.5 * case.info["thickness"] + 0.6 * support  # the upper layer only (z = +dx/2)
+    figure = FramePlot(trajectory, meta, "velocity", slice_plane=parse_slice(f"z={z}"))
+    drawn = figure.points.get_offsets()
+    expected = np.abs(x[:, 2] - z) <= support
+    assert 0 < expected.sum() < len(x) and len(drawn) == expected.sum()
+    np.testing.assert_allclose(np.sort(drawn[:, 0]), np.sort(x[expected, 0]), rtol=1e-6)
+    assert figure.ax.get_ylabel().startswith("y") and "z = " in figure.title.get_text()
+    figure.close()
+    assert parse_slice("X = 0.25") == (0, 0.25)
+
+    capsys.readouterr()
+    for bad, message in [
+        ("w=1", "AXIS=VALUE"),
+        ("z=", "AXIS=VALUE"),
+        ("z=9", "no particle within"),
+    ]:
+        assert main(["plot", str(path), "--slice", bad, "--out", str(tmp_path / "b.png")]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and "--slice" in err[0] and message in err[0], err
+    plate = sphjax.cases.oscillating_plate(n=2)
+    flat = tmp_path / "plate.h5"
+    with sphjax.TrajectoryWriter(flat, plate) as writer:
+        sphjax.simulate(plate, n_steps=1, on_frames=writer)
+    assert main(["plot", str(flat), "--slice", "z=0", "--out", str(tmp_path / "p.png")]) == 2
+    assert "needs a 3D trajectory" in capsys.readouterr().err

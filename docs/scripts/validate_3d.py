@@ -201,9 +201,10 @@ def duct(n, t_end, frames=10):
     )
 
 
-def dam(n, t_scaled):
+def dam(n, t_scaled, wall_slip="no_slip", dim=3):
     t0 = time.perf_counter()
-    case = sphjax.cases.dam_break_3d(n=n)
+    factory = sphjax.cases.dam_break_3d if dim == 3 else sphjax.cases.dam_break
+    case = factory(n=n, wall_slip=wall_slip)
     scale = case.info["time_scale"]
     save_every = max(1, int(0.05 * scale / case.dt))
     n_steps = save_every * int(np.ceil(t_scaled * scale / case.dt / save_every))
@@ -221,11 +222,13 @@ def dam(n, t_scaled):
         front=Z.tolist(),
         martin_moyce=reached.tolist(),
         measured=measured.tolist(),
+        wall_slip=wall_slip,
+        dim=dim,
         wall_s=wall,
     )
-    _store(f"dam_n{n}", record)
+    _store(f"dam_n{n}_{wall_slip}_{dim}d", record)
     for (t_ref, z_ref), z in zip(reached, measured, strict=True):
-        print(f"| {n} | {t_ref} | {z_ref} | {z:.3f} | {z / z_ref - 1:+.1%} |")
+        print(f"| {dim}D {wall_slip} | {n} | {t_ref} | {z_ref} | {z:.3f} | {z / z_ref - 1:+.1%} |")
     print(f"wall {wall:.0f} s, {case.n_particles} particles, {n_steps} steps")
 
 
@@ -237,6 +240,8 @@ def main():
     p.add_argument("--t-end", type=float, default=None)
     p.add_argument("--lattice", action="store_true")
     p.add_argument("--width", type=float, default=1.0)
+    p.add_argument("--wall-slip", default="no_slip", choices=["no_slip", "free_slip"])
+    p.add_argument("--dim", type=int, default=3, choices=[2, 3], help="dam: 2 for the 2D case")
     args = p.parse_args()
     if args.case == "abc":
         for n in args.n or [12, 16]:
@@ -246,7 +251,7 @@ def main():
             tank(n, args.width, args.t_end or 1.0)
     elif args.case == "dam":
         for n in args.n or [8]:
-            dam(n, args.t_end or 2.6)
+            dam(n, args.t_end or 2.6, args.wall_slip, args.dim)
     elif args.case == "duct":
         for n in args.n or [8, 12]:
             duct(n, args.t_end or 0.5)
