@@ -71,7 +71,7 @@ def test_abc_flow_needs_the_kernel_support_under_half_the_box():
 
 @pytest.mark.slow
 def test_abc_flow_kinetic_energy_and_velocity_field():
-    """ABC flow, Re = 50, 10^3 particles, to t = 0.3 (about 30 s).
+    """ABC flow, Re = 50, 10^3 particles, to t = 0.3 (about 25 s of CPU time).
 
     Tolerances: KE/KE0 within 2 % of exp(-2 nu k^2 t) at every saved frame (the
     Taylor-Green test allows 5 % at t = 0.5 with 50^2 particles; measured here -0.9 % at
