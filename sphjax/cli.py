@@ -243,6 +243,30 @@ def _add_run(sub) -> None:
     run.add_argument("--quiet", action="store_true", help="no progress bar")
 
 
+_SLICE_HELP = (
+    "3D trajectories: draw only the particles within one kernel support of a plane, e.g. "
+    "z=0.5 (default: the x-y projection)"
+)
+
+
+def _slice_plane(args):
+    """``--slice AXIS=VALUE`` as ``(axis, value)``, or ``None``."""
+    from sphjax.plot import parse_slice
+
+    if args.slice is None:
+        return None
+    try:
+        return parse_slice(args.slice)
+    except ValueError as err:
+        raise UsageError("--slice", str(err)) from None
+
+
+def _plot_error(err: ValueError) -> UsageError:
+    """The option a FramePlot error is about (a field or a slice)."""
+    flag = "--field" if str(err).startswith("unknown field") else "--slice"
+    return UsageError(flag, str(err))
+
+
 def _add_plot(sub) -> None:
     plot = sub.add_parser(
         "plot",
@@ -258,6 +282,7 @@ def _add_plot(sub) -> None:
         "particle type",
     )
     plot.add_argument("--out", required=True, help="output image, e.g. frame.png")
+    plot.add_argument("--slice", metavar="AXIS=VALUE", default=None, help=_SLICE_HELP)
 
 
 def _add_animate(sub) -> None:
@@ -273,6 +298,7 @@ def _add_animate(sub) -> None:
     animate.add_argument(
         "--every", type=_positive_int, default=1, help="use every EVERY-th saved frame"
     )
+    animate.add_argument("--slice", metavar="AXIS=VALUE", default=None, help=_SLICE_HELP)
     animate.add_argument("--overwrite", action="store_true", help="replace an existing --out")
     animate.add_argument("--quiet", action="store_true", help="no progress bar")
 
@@ -490,11 +516,14 @@ def cmd_plot(args) -> int:
     n = meta["n_frames"]
     if not -n <= args.frame < n:
         raise UsageError("--frame", f"{args.frame} is out of range; the file holds {n} frames")
+    plane = _slice_plane(args)
     trajectory, _ = _read_frames(args.file, frames=args.frame)
     try:
-        figure = FramePlot(trajectory, meta, args.field, frame_offset=args.frame % n)
+        figure = FramePlot(
+            trajectory, meta, args.field, frame_offset=args.frame % n, slice_plane=plane
+        )
     except ValueError as err:
-        raise UsageError("--field", str(err)) from None
+        raise _plot_error(err) from None
     try:
         figure.save(out)
     except OSError as err:
@@ -510,14 +539,15 @@ def cmd_animate(args) -> int:
 
     out = _output_file(args.out, "--out", args.overwrite, MOVIE_SUFFIXES)
     meta = _trajectory_metadata(args.file)
+    plane = _slice_plane(args)
     trajectory, _ = _read_frames(args.file, frames=slice(None, None, args.every))
     try:
         n = animate(
             trajectory, meta, args.field, out, fps=args.fps, progress=not args.quiet,
-            frame_numbers=range(0, meta["n_frames"], args.every),
+            frame_numbers=range(0, meta["n_frames"], args.every), slice_plane=plane,
         )  # fmt: skip
     except ValueError as err:
-        raise UsageError("--field", str(err)) from None
+        raise _plot_error(err) from None
     except OSError as err:
         raise UsageError("--out", f"cannot write '{out}': {err}") from None
     print(f"wrote {out} ({n} frames)", file=sys.stderr)

@@ -5,7 +5,9 @@ returns, so any trajectory file can be drawn.  The view is fitted to the particl
 all frames drawn), lengths are shown in m, mm or µm to keep the tick labels short, the
 colour bar carries the field's SI unit (and a power of ten when the values are very small
 or large), ``kind`` is drawn with one colour per particle type and a legend, and a rigid
-cylinder recorded in the case information (Turek-Hron) is drawn as a disc.
+cylinder recorded in the case information (Turek-Hron) is drawn as a disc.  A 3D
+trajectory is drawn as its x-y projection, or as a slice: the particles within one kernel
+support of a plane such as ``z = 0.5`` (:func:`parse_slice`), drawn in the plane's axes.
 
     from sphjax.io import read_trajectory
     from sphjax.plot import FramePlot
@@ -50,6 +52,34 @@ def unit(field: str, dim: int) -> str:
     return _UNITS.get(field, "")
 
 
+AXES = "xyz"
+
+
+def parse_slice(text: str) -> tuple[int, float]:
+    """``"z=0.5"`` -> ``(2, 0.5)``: the axis (x, y or z) and position of a slicing plane."""
+    name, sep, value = str(text).partition("=")
+    name = name.strip().lower()
+    try:
+        position = float(value)
+    except ValueError:
+        position = None
+    if not sep or name not in AXES or position is None or not math.isfinite(position):
+        raise ValueError(f"a slice is AXIS=VALUE with AXIS x, y or z, e.g. z=0.5; got {text!r}")
+    return AXES.index(name), position
+
+
+def slice_half_width(meta: dict) -> float:
+    """Half the thickness of a slice: the kernel support ``k h`` of the run's Model (two
+    particle spacings if the file does not record it)."""
+    model = meta.get("model") or {}
+    try:
+        from sphjax.core.kernels import as_kernel
+
+        return float(as_kernel(model["kernel"]).support * model["smoothing_length"])
+    except (KeyError, TypeError, ValueError):
+        return 2.0 * float((meta.get("case_info") or {}).get("dx") or 0.0)
+
+
 def _length_scale(extent: float) -> tuple[float, str]:
     """Factor and name of the length unit that keeps tick labels short."""
     if extent >= 0.1:
@@ -84,12 +114,22 @@ class FramePlot:
       frame_offset: the index of ``trajectory``'s first frame in its file (for the title).
       frame_numbers: the index in its file of each frame of ``trajectory`` (for the title;
         default ``frame_offset + i``), e.g. ``range(0, n, 4)`` for every fourth frame.
+      slice_plane: ``None`` (3D: the x-y projection) or ``(axis, value)`` from
+        :func:`parse_slice`: only the particles within one kernel support of that plane
+        are drawn, in the other two axes (3D trajectories only).
     Raises:
-      ValueError: ``field`` is not a State field (the message lists them).
+      ValueError: ``field`` is not a State field (the message lists them), or a slice of
+        a 2D trajectory.
     """
 
     def __init__(
-        self, trajectory, meta: dict, field: str, frame_offset: int = 0, frame_numbers=None
+        self,
+        trajectory,
+        meta: dict,
+        field: str,
+        frame_offset: int = 0,
+        frame_numbers=None,
+        slice_plane=None,
     ):
         import matplotlib
 
@@ -111,9 +151,30 @@ class FramePlot:
         self.dim = position.shape[-1]
         self.kind = np.asarray(states.kind)
         info = meta.get("case_info", {}) or {}
+        axes = [0, 1]
+        self.visible = np.ones(position.shape[:-1], bool)
+        self.slice_text = ""
+        if slice_plane is not None:
+            if self.dim != 3:
+                raise ValueError(f"a slice needs a 3D trajectory; this one is {self.dim}D")
+            axis, value = slice_plane
+            half = slice_half_width(meta)
+            axes = [a for a in range(3) if a != axis]
+            self.visible = np.abs(position[..., axis] - value) <= half
+            if not self.visible.any():
+                lo_a, hi_a = position[..., axis].min(), position[..., axis].max()
+                raise ValueError(
+                    f"no particle within {half:.3g} of {AXES[axis]}={value:g}; the particles "
+                    f"span {AXES[axis]} = {lo_a:.3g} to {hi_a:.3g}"
+                )
+            self.slice_text = f"  ({AXES[axis]} = {value:g} ± {half:.2g})"
+        elif self.dim == 3:
+            self.slice_text = "  (x-y projection)"
+        position = position[..., axes] if self.dim > 1 else position
 
         # view fitted to the particles over all frames, a couple of spacings of margin
-        lo, hi = position[..., :2].min(axis=(0, 1)), position[..., :2].max(axis=(0, 1))
+        shown = position[self.visible]
+        lo, hi = shown[:, :2].min(axis=0), shown[:, :2].max(axis=0)
         if self.dim == 1:
             lo, hi = np.append(lo, -0.5), np.append(hi, 0.5)
         disc = None
@@ -144,8 +205,8 @@ class FramePlot:
         ax.set_ylim(lo[1] * scale, hi[1] * scale)
         ax.xaxis.set_major_locator(ticker.MaxNLocator(nbins=6))
         ax.yaxis.set_major_locator(ticker.MaxNLocator(nbins=int(np.clip(round(8 * aspect), 3, 6))))
-        ax.set_xlabel(f"x [{length_unit}]")
-        ax.set_ylabel(f"y [{length_unit}]")
+        ax.set_xlabel(f"{AXES[axes[0]]} [{length_unit}]")
+        ax.set_ylabel(f"{AXES[axes[1]]} [{length_unit}]")
         size = 1.0  # set from the spacing on screen once the layout is known
 
         if disc is not None:
@@ -161,8 +222,9 @@ class FramePlot:
             present = sorted(int(k) for k in np.unique(self.kind))
             colours = np.array([KIND_COLOURS.get(k, "k") for k in range(max(present) + 1)])
             self._colour_of = colours
+            first = self.visible[0]
             self.points = ax.scatter(
-                *self.xy[0].T, s=size, c=list(colours[self.kind[0]]), linewidths=0
+                *self.xy[0][first].T, s=size, c=list(colours[self.kind[0][first]]), linewidths=0
             )
             handles = [
                 matplotlib.lines.Line2D(
@@ -190,14 +252,19 @@ class FramePlot:
             if power:
                 u = f"10{_superscript(power)} {u}".strip()
             label = f"{label} [{u}]" if u else label
-            shown = self.values[~self.wall] if (~self.wall).any() else self.values.ravel()
+            drawn = self.visible & ~self.wall
+            shown = self.values[drawn] if drawn.any() else self.values[self.visible]
             vmin, vmax = float(np.nanmin(shown)), float(np.nanmax(shown))
             if not vmax > vmin:
                 vmin, vmax = vmin - 0.5, vmax + 0.5
             self.walls = ax.scatter(
-                *self.xy[0][self.wall[0]].T, s=size, c="0.75", marker="s", linewidths=0
+                *self.xy[0][self.wall[0] & self.visible[0]].T,
+                s=size,
+                c="0.75",
+                marker="s",
+                linewidths=0,
             )
-            mobile = ~self.wall[0]
+            mobile = ~self.wall[0] & self.visible[0]
             self.points = ax.scatter(
                 *self.xy[0][mobile].T, s=size, c=self.values[0][mobile], cmap="viridis",
                 vmin=vmin, vmax=vmax, linewidths=0,
@@ -221,20 +288,20 @@ class FramePlot:
 
     def set_frame(self, i: int) -> None:
         """Draw frame ``i`` of the trajectory."""
+        visible = self.visible[i]
         if self.values is None:
-            self.points.set_offsets(self.xy[i])
-            self.points.set_color(list(self._colour_of[self.kind[i]]))
+            self.points.set_offsets(self.xy[i][visible])
+            self.points.set_color(list(self._colour_of[self.kind[i][visible]]))
         else:
-            mobile = ~self.wall[i]
-            self.walls.set_offsets(self.xy[i][self.wall[i]])
+            mobile = ~self.wall[i] & visible
+            self.walls.set_offsets(self.xy[i][self.wall[i] & visible])
             self.points.set_offsets(self.xy[i][mobile])
             self.points.set_array(self.values[i][mobile])
         n = self.n_frames_in_file
         name = self.meta.get("case", "?")
-        projection = "  (x-y projection)" if self.dim == 3 else ""
         self.title.set_text(
             f"{name}   t = {self.times[i]:.4g} s   frame {self.frame_numbers[i]}/{n - 1}"
-            f"{projection}"
+            f"{self.slice_text}"
         )
 
     def save(self, path) -> Path:
@@ -248,13 +315,21 @@ class FramePlot:
 
 
 def animate(
-    trajectory, meta: dict, field: str, path, *, fps: int = 20, progress=True, frame_numbers=None
+    trajectory,
+    meta: dict,
+    field: str,
+    path,
+    *,
+    fps: int = 20,
+    progress=True,
+    frame_numbers=None,
+    slice_plane=None,
 ) -> int:
     """Write every frame of ``trajectory`` coloured by ``field`` to a GIF or an MP4.
 
     GIFs are written with Pillow; MP4s (H.264) with the ffmpeg binary of the
     ``imageio-ffmpeg`` package.  ``frame_numbers``: see :class:`FramePlot`.  Returns the
-    number of frames written.
+    number of frames written; ``slice_plane``: see :class:`FramePlot`.
     """
     from matplotlib import animation
     from tqdm import tqdm
@@ -263,7 +338,7 @@ def animate(
     suffix = path.suffix.lower()
     if suffix not in MOVIE_SUFFIXES:
         raise ValueError(f"unknown movie extension {suffix!r}; use .gif or .mp4")
-    plot = FramePlot(trajectory, meta, field, frame_numbers=frame_numbers)
+    plot = FramePlot(trajectory, meta, field, frame_numbers=frame_numbers, slice_plane=slice_plane)
     n = len(trajectory)
     if suffix == ".gif":
         writer = animation.PillowWriter(fps=fps)

@@ -18,6 +18,15 @@ from sphjax.cases.fluid import (
     taylor_green,
     taylor_green_velocity,
 )
+from sphjax.cases.fluid3d import (
+    abc_flow_3d,
+    abc_pressure,
+    abc_velocity,
+    dam_break_3d,
+    duct_poiseuille_3d,
+    duct_velocity,
+    hydrostatic_tank_3d,
+)
 from sphjax.cases.setup_file import SetupError, from_toml
 from sphjax.cases.solid import (
     oscillating_plate,
@@ -26,6 +35,7 @@ from sphjax.cases.solid import (
     plate_sound_speed,
     turek_hron_csm,
 )
+from sphjax.cases.solid3d import beam_angular_frequency, cantilever_3d, cantilever_reference
 from sphjax.observables import (
     oscillation_stats,
     poiseuille_centreline_speed,
@@ -40,6 +50,11 @@ CASES = {
     "dam_break": dam_break,
     "oscillating_plate": oscillating_plate,
     "turek_hron_csm": turek_hron_csm,
+    "abc_flow_3d": abc_flow_3d,
+    "hydrostatic_tank_3d": hydrostatic_tank_3d,
+    "cantilever_3d": cantilever_3d,
+    "duct_poiseuille_3d": duct_poiseuille_3d,
+    "dam_break_3d": dam_break_3d,
 }
 
 
@@ -89,4 +104,14 @@ __all__ = [
     "plate_mode_shape",
     "plate_reference",
     "plate_sound_speed",
+    "abc_flow_3d",
+    "abc_velocity",
+    "abc_pressure",
+    "hydrostatic_tank_3d",
+    "cantilever_3d",
+    "cantilever_reference",
+    "beam_angular_frequency",
+    "duct_poiseuille_3d",
+    "duct_velocity",
+    "dam_break_3d",
 ]

@@ -2,8 +2,9 @@
 
 Every case factory takes ``n``, the number of particles across its characteristic
 length ``L`` (``dx = L / n``), and reports ``dx`` and ``n`` in ``case.info``.  The length
-is found by building the case once at its smallest resolution, so a new case needs no
-entry here as long as it follows that convention.
+is found by building the case once at its smallest resolution (``MIN_N``, or the
+factory's ``min_n`` attribute where a case needs more), so a new case needs no entry here
+as long as it follows that convention.
 """
 
 from __future__ import annotations
@@ -16,11 +17,15 @@ from sphjax.cases._geometry import check_positive
 MIN_N = 4
 
 
+def _smallest(factory) -> int:
+    return getattr(factory, "min_n", MIN_N)
+
+
 def resolution_length(factory, **kwargs) -> float:
     """The length ``L`` a case's ``n`` divides (``dx = L / n``), for these case arguments."""
     if "n" not in inspect.signature(factory).parameters:
         raise ValueError(f"case {factory.__name__!r} has no resolution argument n")
-    case = factory(n=MIN_N, **kwargs)
+    case = factory(n=_smallest(factory), **kwargs)
     try:
         return float(case.info["dx"]) * int(case.info["n"])
     except KeyError:
@@ -35,10 +40,10 @@ def n_for_spacing(factory, dx, **kwargs) -> int:
     dx = check_positive("dx", dx)
     length = resolution_length(factory, **kwargs)
     n = max(1, round(length / dx))
-    if n < MIN_N:
+    if n < _smallest(factory):
         raise ValueError(
             f"dx={dx:g} is too coarse for {factory.__name__}: its length {length:g} would hold "
-            f"only {length / dx:.3g} particles; use dx <= {length / MIN_N:g}"
+            f"only {length / dx:.3g} particles; use dx <= {length / _smallest(factory):g}"
         )
     if not math.isfinite(length / dx) or n > 10**7:
         raise ValueError(f"dx={dx:g} is too fine for {factory.__name__} (n={n}); use a larger dx")

@@ -33,6 +33,19 @@ def _finish(name, state, model, params, t_end, info, dt=None, initial_state=None
     )
 
 
+def _relax_iterations(value) -> int:
+    """``relax_iterations`` as an int; a ValueError naming it unless it is a whole number >= 0."""
+    try:
+        whole = int(value) == value and value >= 0
+    except (TypeError, ValueError, OverflowError):
+        whole = False
+    if not whole:
+        raise ValueError(
+            f"relax_iterations must be a whole number >= 0 (0: no packing), got {value!r}"
+        )
+    return int(value)
+
+
 def taylor_green(
     n: int = 50,
     reynolds: float = 100.0,
@@ -89,15 +102,7 @@ def taylor_green(
     check_positive("speed", speed)
     if not 0.0 <= disorder < 0.5:
         raise ValueError(f"disorder must lie in [0, 0.5) (units of dx), got {disorder}")
-    try:
-        whole = int(relax_iterations) == relax_iterations and relax_iterations >= 0
-    except (TypeError, ValueError, OverflowError):
-        whole = False
-    if not whole:
-        raise ValueError(
-            f"relax_iterations must be a whole number >= 0 (0: no packing), "
-            f"got {relax_iterations!r}"
-        )
+    relax_iterations = _relax_iterations(relax_iterations)
     dx = 1.0 / n
     kernel = as_kernel(kernel)
     h = h_factor * dx
@@ -262,8 +267,7 @@ def poiseuille_startup_speed(y, t, width, viscosity, body_force, terms: int = 20
 def _tank(
     name,
     fluid,
-    tank_width,
-    tank_height,
+    tank_upper,
     dx,
     kernel,
     h,
@@ -277,30 +281,37 @@ def _tank(
     info,
     fluid_height,
 ):
+    """A tank ``[0, tank_upper]`` (2D or 3D, open at the top, gravity along the last
+    axis) of dummy walls around ``fluid``, with the hydrostatic initial density."""
+    dim = fluid.shape[1]
+    tank_upper = np.asarray(tank_upper, float)
     layers = wall_layers(kernel.support * h, dx)
-    walls = box_walls([0.0, 0.0], [tank_width, tank_height], dx, layers, open_top=True)
+    walls = box_walls([0.0] * dim, tank_upper, dx, layers, open_top=True)
     x = np.concatenate([fluid, walls])
     kind = np.concatenate([np.full(len(fluid), Kind.FLUID), np.full(len(walls), Kind.WALL)])
     # hydrostatic initial density so the column starts near equilibrium (eq. 12 inverted)
     gamma = fluid_kw.get("gamma", 7.0)
-    depth = jnp.asarray(np.where(kind == Kind.FLUID, fluid_height - x[:, 1], 0.0))
-    params = make_params(2, reference_density=rho0, sound_speed=c0, gravity=(0.0, -g), **params_kw)
+    depth = jnp.asarray(np.where(kind == Kind.FLUID, fluid_height - x[:, -1], 0.0))
+    gravity = (0.0,) * (dim - 1) + (-g,)
+    params = make_params(dim, reference_density=rho0, sound_speed=c0, gravity=gravity, **params_kw)
 
     def initial_state(p):
-        """Density ``rho(p = rho0 g (H - y))`` and mass ``rho0 dx^2`` from ``p`` (eq. 12)."""
+        """Density ``rho(p = rho0 g (H - z))`` (``z`` the last axis) and mass ``rho0 dx^d``
+        from ``p`` (eq. 12)."""
         rho0_p = p.reference_density
         pressure = rho0_p * (-p.gravity[-1]) * depth
         rho = tait_density(pressure, rho0_p, p.sound_speed, gamma)
-        return make_state(x, 0.0, rho, rho0_p * dx**2, kind)
+        return make_state(x, 0.0, rho, rho0_p * dx**dim, kind)
 
     margin = (layers + 2) * dx
+    upper = tuple(float(u) + margin for u in tank_upper[:-1]) + (
+        2.0 * float(tank_upper[-1]) + margin,
+    )
     model = Model(
-        dim=2,
+        dim=dim,
         smoothing_length=h,
         kernel=kernel,
-        domain=Domain(
-            (-margin, -margin), (tank_width + margin, 2.0 * tank_height + margin), (False, False)
-        ),
+        domain=Domain((-margin,) * dim, upper, (False,) * dim),
         systems=(fluid_system(**fluid_kw), wall_system(wall_slip)),
     )
     return _finish(
@@ -336,8 +347,7 @@ def hydrostatic_tank(
     return _tank(
         "hydrostatic_tank",
         fluid,
-        W,
-        1.2 * H,
+        (W, 1.2 * H),
         dx,
         kernel,
         h,
@@ -404,8 +414,7 @@ def dam_break(
     return _tank(
         "dam_break",
         fluid,
-        tank_length,
-        1.25 * H,
+        (tank_length, 1.25 * H),
         dx,
         kernel,
         h,

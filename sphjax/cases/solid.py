@@ -66,18 +66,19 @@ def _strip(x0, y0, nx, ny, dx, i_start=0):
     return np.stack([gx.ravel(), gy.ravel()], axis=-1)
 
 
-def _tip_indices(x, kind, y_centre, dx):
-    """Particles of the free end's column closest to the centre line ``y = y_centre``."""
+def _tip_indices(x, kind, centre_line, dx):
+    """Particles of the free end's cross-section closest to the centre line, which runs
+    along x through ``centre_line`` (``y`` in 2D, ``(y, z)`` in 3D)."""
     solid = np.flatnonzero(kind == Kind.SOLID)
     x_max = x[solid, 0].max()
     column = solid[np.abs(x[solid, 0] - x_max) < 1e-6 * dx]
-    dist = np.abs(x[column, 1] - y_centre)
+    dist = np.linalg.norm(x[column, 1:] - np.atleast_1d(centre_line), axis=-1)
     return column[dist < dist.min() + 1e-6 * dx]
 
 
 def _solid_model(kernel, h, domain, penalty):
     return Model(
-        dim=2,
+        dim=domain.dim,
         smoothing_length=h,
         kernel=kernel,
         domain=domain,
@@ -123,7 +124,7 @@ def _finish(name, x, velocity, kind, dx, rho, model, params, t_end, info, cfl, v
     The state's density and mass follow ``params.solid_density`` too, so
     ``case.state_for(params)`` is the state this factory builds with those parameters.
     """
-    volume = dx**2
+    volume = dx ** x.shape[1]
 
     def initial_state(p):
         v = velocity if velocity_fn is None else velocity_fn(p)

@@ -1,0 +1,264 @@
+"""Run the three-dimensional validation cases; results go to docs/figures/validation_3d.json.
+
+    python docs/scripts/validate_3d.py abc --n 12 16 20
+    python docs/scripts/validate_3d.py abc --n 16 --lattice        # the unrelaxed lattice start
+    python docs/scripts/validate_3d.py tank --n 8 12
+    python docs/scripts/validate_3d.py duct --n 8 12 16
+    python docs/scripts/validate_3d.py dam --n 8                # --t-end in T = t sqrt(2g/L)
+    python docs/scripts/validate_3d.py cantilever --n 4 6 8
+
+Each run is stored in the JSON file under its own key (re-running replaces it) and printed
+as a Markdown table row; docs/validation_3d.md holds the tables.  Float32, as a user runs.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import pathlib
+import time
+
+import numpy as np
+
+import sphjax
+from sphjax import Kind
+from sphjax.cases import (
+    abc_velocity,
+    duct_velocity,
+    oscillation_stats,
+    surge_front,
+    tip_displacement,
+)
+
+DOCS = pathlib.Path(__file__).resolve().parents[1]
+# Martin & Moyce (1952), Table 2 (height 2L), (T, Z/L): the reference of record.
+MARTIN_MOYCE = np.array(
+    [
+        (0.41, 1.11),
+        (0.84, 1.22),
+        (1.19, 1.44),
+        (1.43, 1.67),
+        (1.63, 1.89),
+        (1.83, 2.11),
+        (1.98, 2.33),
+        (2.20, 2.56),
+        (2.32, 2.78),
+        (2.51, 3.00),
+    ]
+)
+RESULTS = DOCS / "figures" / "validation_3d.json"
+
+
+def _store(key, record):
+    data = json.loads(RESULTS.read_text()) if RESULTS.exists() else {}
+    data[key] = record
+    RESULTS.parent.mkdir(parents=True, exist_ok=True)
+    RESULTS.write_text(json.dumps(data, indent=1, sort_keys=True))
+
+
+def abc(n, reynolds, t_end, lattice, frames=10):
+    t0 = time.perf_counter()
+    kw = dict(disorder=0.0, relax_iterations=0) if lattice else {}
+    case = sphjax.cases.abc_flow_3d(n=n, reynolds=reynolds, **kw)
+    start = time.perf_counter() - t0
+    n_steps = frames * int(np.ceil(t_end / case.dt / frames))
+    t0 = time.perf_counter()
+    traj = sphjax.simulate(case, n_steps=n_steps, save_every=n_steps // frames, dt=t_end / n_steps)
+    wall = time.perf_counter() - t0
+    t = np.asarray(traj.times)
+    v = np.asarray(traj.states.velocity)
+    m = np.asarray(traj.states.mass)
+    ke = 0.5 * np.sum(m * np.sum(v**2, -1), -1)
+    exact = abc_velocity(np.asarray(traj.states.position), t[:, None], case)
+    error = np.sqrt(np.mean(np.sum((v - exact) ** 2, -1), -1) / np.mean(np.sum(exact**2, -1), -1))
+    ke_exact = np.exp(2 * case.info["decay_rate"] * t)
+    record = dict(
+        n=n,
+        reynolds=reynolds,
+        start="lattice" if lattice else "relaxed",
+        particles=case.n_particles,
+        steps=n_steps,
+        times=t.tolist(),
+        ke_ratio=(ke / ke[0]).tolist(),
+        ke_exact=ke_exact.tolist(),
+        velocity_error=error.tolist(),
+        start_s=start,
+        wall_s=wall,
+    )
+    _store(f"abc_n{n}_re{reynolds:g}_{record['start']}", record)
+    print(
+        f"| {n} | {reynolds:g} | {record['start']} | {ke[-1] / ke[0]:.4f} ({ke_exact[-1]:.4f}) "
+        f"| {ke[-1] / ke[0] / ke_exact[-1] - 1:+.2%} | {np.max(np.diff(ke)) / ke[0]:+.2%} "
+        f"| {error[1]:.2%} | {error.max():.2%} | {start:.0f} | {wall:.0f} |"
+    )
+
+
+def cantilever(n, t_end, save_every=20):
+    t0 = time.perf_counter()
+    case = sphjax.cases.cantilever_3d(n=n)
+    n_steps = save_every * int(np.ceil(t_end / case.dt / save_every))
+    traj = sphjax.simulate(case, n_steps=n_steps, save_every=save_every)
+    wall = time.perf_counter() - t0
+    u = np.asarray(tip_displacement(traj, case))
+    stats = oscillation_stats(np.asarray(traj.times), u[:, 1])
+    info = case.info
+    record = dict(
+        n=n,
+        particles=case.n_particles,
+        steps=n_steps,
+        times=np.asarray(traj.times).tolist(),
+        tip_y=u[:, 1].tolist(),
+        tip_z_max=float(np.abs(u[:, 2]).max()),
+        period=stats["period"],
+        amplitude=stats["amplitude"],
+        mean=stats["mean"],
+        reference_period=info["period"],
+        reference_amplitude=info["tip_amplitude"],
+        wall_s=wall,
+    )
+    _store(f"cantilever_n{n}", record)
+    print(
+        f"| {n} | {case.n_particles} | {n_steps} | {wall:.0f} | {stats['period']:.4f} | "
+        f"{stats['period'] / info['period'] - 1:+.1%} | {stats['amplitude']:.3e} | "
+        f"{stats['amplitude'] / info['tip_amplitude'] - 1:+.1%} |"
+    )
+
+
+def tank(n, width, t_end, frames=10):
+    t0 = time.perf_counter()
+    case = sphjax.cases.hydrostatic_tank_3d(n=n, width=width)
+    n_steps = frames * int(np.ceil(t_end / case.dt / frames))
+    traj = sphjax.simulate(case, n_steps=n_steps, save_every=n_steps // frames)
+    wall = time.perf_counter() - t0
+    info = case.info
+    g, H = info["gravity"], info["height"]
+    fluid = np.asarray(case.state.kind) == Kind.FLUID
+    x = np.asarray(traj.states.position)[:, fluid]
+    p = np.asarray(traj.states.pressure)[:, fluid]
+    bottom = [float(np.polyfit(x[i, :, 2], p[i], 1)[1]) for i in range(len(traj.times))]
+    speed = np.linalg.norm(np.asarray(traj.states.velocity)[:, fluid], axis=-1).max(axis=-1)
+    inside = bool(
+        np.all(x[..., 2] > 0)
+        & np.all((x[..., :2] > 0) & (x[..., :2] < [info["width"], info["depth"]]))
+    )
+    record = dict(
+        n=n,
+        width=info["width"],
+        particles=case.n_particles,
+        fluid=int(fluid.sum()),
+        steps=n_steps,
+        times=np.asarray(traj.times).tolist(),
+        bottom_pressure=bottom,
+        reference=1000.0 * g * H,
+        max_speed=(speed / np.sqrt(g * H)).tolist(),
+        inside=inside,
+        wall_s=wall,
+    )
+    _store(f"tank_n{n}_w{width:g}", record)
+    print(
+        f"| {n} | {info['width']:g} x {info['depth']:g} | {int(fluid.sum())} | {n_steps} | "
+        f"{bottom[-1] / (1000.0 * g * H) - 1:+.2%} | {speed[-1] / np.sqrt(g * H):.2e} | "
+        f"{inside} | {wall:.0f} |"
+    )
+
+
+def duct(n, t_end, frames=10):
+    t0 = time.perf_counter()
+    case = sphjax.cases.duct_poiseuille_3d(n=n)
+    n_steps = frames * int(np.ceil(t_end / case.dt / frames))
+    traj = sphjax.simulate(case, n_steps=n_steps, save_every=n_steps // frames, dt=t_end / n_steps)
+    wall = time.perf_counter() - t0
+    info = case.info
+    a, b, dx = 0.5 * info["width"], 0.5 * info["height"], info["dx"]
+    fluid = np.asarray(case.state.kind) == Kind.FLUID
+    centre, exact, profile = [], [], []
+    for i in range(1, len(traj.times)):
+        t = float(traj.times[i])
+        x = np.asarray(traj.states.position[i])[fluid]
+        u = np.asarray(traj.states.velocity[i])[fluid, 0]
+        y, z = x[:, 1] - a, x[:, 2] - b
+        ue = duct_velocity(y, z, a, b, info["viscosity"], info["body_force"], t=t)
+        near = (np.abs(y) < 0.6 * dx) & (np.abs(z) < 0.6 * dx)
+        centre.append(float(u[near].mean()))
+        exact.append(float(ue[near].mean()))
+        profile.append(float(np.sqrt(np.mean((u - ue) ** 2)) / info["centre_speed"]))
+    record = dict(
+        n=n,
+        particles=case.n_particles,
+        steps=n_steps,
+        times=np.asarray(traj.times)[1:].tolist(),
+        centre=centre,
+        centre_exact=exact,
+        profile_error=profile,
+        wall_s=wall,
+    )
+    _store(f"duct_n{n}", record)
+    errors = np.array(centre) / np.array(exact) - 1
+    middle = errors[len(errors) // 2]
+    print(
+        f"| {n} | {case.n_particles} | {n_steps} | {errors[0]:+.2%} | {middle:+.2%} "
+        f"| {errors[-1]:+.2%} | {profile[-1]:.2%} | {wall:.0f} |"
+    )
+
+
+def dam(n, t_scaled, wall_slip="no_slip", dim=3):
+    t0 = time.perf_counter()
+    factory = sphjax.cases.dam_break_3d if dim == 3 else sphjax.cases.dam_break
+    case = factory(n=n, wall_slip=wall_slip)
+    scale = case.info["time_scale"]
+    save_every = max(1, int(0.05 * scale / case.dt))
+    n_steps = save_every * int(np.ceil(t_scaled * scale / case.dt / save_every))
+    traj = sphjax.simulate(case, n_steps=n_steps, save_every=save_every)
+    wall = time.perf_counter() - t0
+    T = np.asarray(traj.times) / scale
+    Z = np.asarray(surge_front(traj.states, case))
+    reached = MARTIN_MOYCE[MARTIN_MOYCE[:, 0] <= T[-1]]
+    measured = np.interp(reached[:, 0], T, Z)
+    record = dict(
+        n=n,
+        particles=case.n_particles,
+        steps=n_steps,
+        T=T.tolist(),
+        front=Z.tolist(),
+        martin_moyce=reached.tolist(),
+        measured=measured.tolist(),
+        wall_slip=wall_slip,
+        dim=dim,
+        wall_s=wall,
+    )
+    _store(f"dam_n{n}_{wall_slip}_{dim}d", record)
+    for (t_ref, z_ref), z in zip(reached, measured, strict=True):
+        print(f"| {dim}D {wall_slip} | {n} | {t_ref} | {z_ref} | {z:.3f} | {z / z_ref - 1:+.1%} |")
+    print(f"wall {wall:.0f} s, {case.n_particles} particles, {n_steps} steps")
+
+
+def main():
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("case", choices=["abc", "tank", "duct", "dam", "cantilever"])
+    p.add_argument("--n", type=int, nargs="*", default=None)
+    p.add_argument("--reynolds", type=float, default=50.0)
+    p.add_argument("--t-end", type=float, default=None)
+    p.add_argument("--lattice", action="store_true")
+    p.add_argument("--width", type=float, default=1.0)
+    p.add_argument("--wall-slip", default="no_slip", choices=["no_slip", "free_slip"])
+    p.add_argument("--dim", type=int, default=3, choices=[2, 3], help="dam: 2 for the 2D case")
+    args = p.parse_args()
+    if args.case == "abc":
+        for n in args.n or [12, 16]:
+            abc(n, args.reynolds, args.t_end or 0.5, args.lattice)
+    elif args.case == "tank":
+        for n in args.n or [8, 12]:
+            tank(n, args.width, args.t_end or 1.0)
+    elif args.case == "dam":
+        for n in args.n or [8]:
+            dam(n, args.t_end or 2.6, args.wall_slip, args.dim)
+    elif args.case == "duct":
+        for n in args.n or [8, 12]:
+            duct(n, args.t_end or 0.5)
+    elif args.case == "cantilever":
+        for n in args.n or [4, 6, 8]:
+            cantilever(n, args.t_end or 0.55)
+
+
+if __name__ == "__main__":
+    main()
