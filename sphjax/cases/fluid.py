@@ -75,11 +75,19 @@ def taylor_green(
 
     The initial density and masses follow ``params.sound_speed``,
     ``params.reference_density`` and ``params.reference_pressure``
-    (``case.state_for(params)``; ``simulate(case, params)`` uses it).
+    (``case.state_for(params)``; ``simulate(case, params)`` uses it), and so does the
+    transport-velocity background pressure ``p_b = transport_pressure_factor * rho0 c0^2``
+    (:class:`~sphjax.TransportVelocity` evaluates it from Params).  The reference pressure
+    ``p0 = reference_pressure_factor * rho0 c0^2`` is computed once, when the case is
+    built, and stored as ``Params.reference_pressure``: after ``replace(sound_speed=...)``
+    set ``reference_pressure`` too if it should scale with ``c0^2``.
 
     Args:
       n: particles per side (``dx = 1 / n``).
-      reference_pressure_factor: ``p0 = factor * rho0 c0^2`` added to the pressure.
+      reference_pressure_factor: ``p0 = factor * rho0 c0^2`` added to the pressure (at
+        build time).
+      transport_pressure_factor: the transport-velocity background pressure
+        ``p_b = factor * rho0 c0^2``, evaluated from Params in every step.
       disorder: largest random displacement from the lattice, in units of ``dx``.
       seed: seed of that displacement.
       relax_iterations: pseudo-time steps of the packing (0: none).
@@ -128,7 +136,6 @@ def taylor_green(
         kinematic_viscosity=nu,
         reference_pressure=p0,
         artificial_alpha=artificial_alpha,
-        transport_pressure=transport_pressure_factor * rho0 * c0**2,
     )
 
     def initial_state(p):
@@ -155,6 +162,7 @@ def taylor_green(
                 physical_viscosity=True,
                 density_diffusion=density_diffusion,
                 transport_velocity=transport_velocity,
+                transport_pressure_factor=transport_pressure_factor,
             ),
         ),
     )
@@ -315,12 +323,15 @@ def hydrostatic_tank(
     gravity: float = 9.81,
     sound_speed_factor: float = 10.0,
     artificial_alpha: float = 0.1,
+    density_diffusion: str | None = "molteni",
     t_end: float = 2.0,
 ) -> Case:
     """A water column of depth ``H`` at rest in a tank: ``p = rho0 g (H - y)``.
 
     Args:
       n: particles over the depth (``dx = H / n``).
+      density_diffusion: ``"molteni"`` (Molteni & Colagrossi 2009 with the hydrostatic
+        correction), ``"antuono"`` (Antuono et al. 2010) or ``None``.
     """
     n = check_resolution("n", n, 4)
     H = check_positive("height", height)
@@ -349,7 +360,7 @@ def hydrostatic_tank(
             density="continuity",
             gamma=7.0,
             artificial_viscosity=True,
-            density_diffusion="molteni",
+            density_diffusion=density_diffusion,
         ),
         "no_slip",
         t_end,
