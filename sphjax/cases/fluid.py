@@ -372,6 +372,7 @@ def hydrostatic_tank(
 def dam_break(
     n: int = 20,
     column_width: float = 0.3,
+    column_height: float | None = None,
     tank_length_factor: float = 5.0,
     gravity: float = 9.81,
     sound_speed_factor: float = 20.0,
@@ -388,14 +389,23 @@ def dam_break(
     ``alpha = 0.1`` (the experiment had wall friction; free-slip walls with ``alpha = 0.02``
     run 12-17 % ahead of it at ``T = 2-2.3``, see docs/validation.md).
 
+    The other common set-up, with a pressure probe on the right wall (Zhou et al. 1999,
+    Buchner 2002, Colagrossi & Landrini 2003): ``column_width=1.2, column_height=0.6,
+    tank_length_factor=2.6833`` (a tank 5.366 H long); measure the wall pressure with
+    :func:`sphjax.observables.probe_pressure` at ``(case.info["tank_length"], y)``.
+
     Args:
       n: particles across the column width (``dx = L / n``).
+      column_height: ``H`` (default ``2 L``, Martin & Moyce's column).
     """
     n = check_resolution("n", n, 4)
     L = check_positive("column_width", column_width)
     g = check_positive("gravity", gravity)
     dx = L / n
-    H = 2.0 * L
+    if column_height is None:
+        H = 2.0 * L
+    else:
+        H = dx * max(1, round(check_positive("column_height", column_height) / dx))
     kernel, h = WendlandC2(), 1.5 * dx
     rho0 = 1000.0
     c0 = sound_speed_factor * math.sqrt(g * H)
@@ -416,7 +426,7 @@ def dam_break(
         "dam_break",
         fluid,
         tank_length,
-        1.25 * H,
+        1.25 * max(H, L),
         dx,
         kernel,
         h,
