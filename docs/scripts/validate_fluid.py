@@ -65,6 +65,32 @@ KOSHIZUKA_OKA = np.array(
         (3.096, 3.624),
     ]
 )
+# Buchner (2002), PhD thesis TU Delft, pressure sensor P1 (right wall, y = 0.16 m) of the
+# dam break of Zhou et al. (1999) (column 1.2 x 0.6 m, tank 3.22 m), as digitised in
+# TrixiParticles.jl (validation/dam_break_2d/exp_pressure_sensor_P1.csv):
+# (t sqrt(g/H), p / (rho0 g H)), first impact and plateau.
+BUCHNER_P1 = np.array(
+    [
+        (2.42553, -0.01511),
+        (2.47263, 0.07666),
+        (2.49148, 0.15352),
+        (2.55271, 0.26544),
+        (2.61552, 0.37138),
+        (2.65007, 0.56241),
+        (2.68932, 0.66239),
+        (2.77411, 0.68698),
+        (2.83535, 0.67203),
+        (2.90287, 0.66081),
+        (2.96097, 0.64586),
+        (3.02221, 0.64285),
+        (3.13212, 0.57862),
+        (3.23105, 0.54574),
+        (3.36765, 0.54121),
+        (3.51996, 0.54487),
+        (3.67856, 0.54108),
+        (3.90467, 0.54396),
+    ]
+)
 TG_REYNOLDS = (50, 100, 400, 1000)
 
 
@@ -322,6 +348,85 @@ def dam_break(n, rows, density_diffusion="molteni"):
     return wall
 
 
+def dam_break_impact(runs, rows, t_end=3.6):
+    """Pressure on the right wall (sensor P1, y = 0.16 m) of the Zhou/Buchner dam break:
+    arrival of the first impact, peak, and the mean over t sqrt(g/H) in [2.8, 3.5]."""
+    H, g = 0.6, 9.81
+    scale = np.sqrt(H / g)
+    wall = 0.0
+    plt.figure(figsize=(5.5, 3.5))
+    window_ref = np.linspace(2.8, 3.5, 701)
+    mean_ref = float(np.mean(np.interp(window_ref, BUCHNER_P1[:, 0], BUCHNER_P1[:, 1])))
+    for n, diffusion in runs:
+        case = sphjax.cases.dam_break(
+            n=n,
+            column_width=2 * H,
+            column_height=H,
+            tank_length_factor=5.366 / 2,
+            wall_slip="free_slip",
+            artificial_alpha=0.02,
+            density_diffusion=diffusion,
+        )
+        traj, seconds = run(case, t_end * scale, frames=int(t_end / 0.01))
+        wall += seconds
+        T = np.asarray(traj.times) / scale
+        p = np.asarray(
+            sphjax.cases.probe_pressure(traj.states, case, (case.info["tank_length"], 0.16))
+        ) / (1000.0 * g * H)
+        label = f"H/dx={n // 2}, {diffusion}"
+        arrival = float(T[np.argmax(p > 0.15)])
+        window = (T >= 2.8) & (T <= 3.5)
+        k = int(np.argmax(p))
+        rows.append(
+            (
+                "dam_break_impact",
+                label,
+                "P1 arrival (p > 0.15)",
+                "2.49",
+                f"{arrival:.3f}",
+                f"{arrival - 2.49:+.3f}",
+            )
+        )
+        rows.append(
+            (
+                "dam_break_impact",
+                label,
+                "P1 mean over T in [2.8, 3.5]",
+                f"{mean_ref:.3f}",
+                f"{np.mean(p[window]):.3f}",
+                f"{np.mean(p[window]) / mean_ref - 1:+.1%}",
+            )
+        )
+        rows.append(
+            (
+                "dam_break_impact",
+                label,
+                "P1 rms fluctuation over [2.8, 3.5]",
+                "",
+                f"{np.std(p[window]):.3f}",
+                "",
+            )
+        )
+        rows.append(
+            (
+                "dam_break_impact",
+                label,
+                "P1 largest value (time)",
+                "0.687 (2.77)",
+                f"{p[k]:.2f} ({T[k]:.2f})",
+                "",
+            )
+        )
+        plt.plot(T, p, lw=0.8, label=f"sphjax {label}")
+    plt.plot(BUCHNER_P1[:, 0], BUCHNER_P1[:, 1], "ko", ms=3, label="Buchner (2002), P1")
+    plt.xlim(2.2, t_end), plt.ylim(-1.0, 2.0)
+    plt.xlabel("t sqrt(g/H)"), plt.ylabel("p / (rho0 g H)"), plt.legend(fontsize=7)
+    plt.tight_layout()
+    plt.savefig(DOCS / "img" / "dam_break_impact.png", dpi=120)
+    plt.close()
+    return wall
+
+
 def main():
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument("--quick", action="store_true", help="coarser resolutions")
@@ -357,6 +462,13 @@ def main():
             wall = hydrostatic(20, rows)
         elif name == "dam_break":
             wall = dam_break(20 if args.quick else 30, rows)
+        elif name == "dam_break_impact":
+            runs = (
+                [(30, "molteni")]
+                if args.quick
+                else [(40, "molteni"), (40, "antuono"), (60, "molteni")]
+            )
+            wall = dam_break_impact(runs, rows)
         elif name == "dam_break_antuono":
             wall = dam_break(20 if args.quick else 30, rows, "antuono")
         else:
@@ -380,6 +492,19 @@ def main():
         "Moyce removed a gate (the simulation releases the column instantly) and had wall",
         "friction.",
         "",
+        "`dam_break_impact`: the dam break of Zhou et al. (1999) and Buchner (2002) (column",
+        "1.2 m wide and H = 0.6 m high, tank 5.366 H long; `dam_break(column_width=1.2,",
+        'column_height=0.6, tank_length_factor=2.683, wall_slip="free_slip",',
+        "artificial_alpha=0.02)`), pressure on the right wall at sensor P1 (y = 0.16 m) from",
+        "`sphjax.cases.probe_pressure` (kernel average of the fluid's pressure at the wall's",
+        "face), in units of rho0 g H against t sqrt(g/H).  Reference: Buchner's measurement",
+        "of P1 (PhD thesis, TU Delft 2002), as digitised in TrixiParticles.jl.  The impact",
+        "arrives on time, but at these resolutions the pressure after it is dominated by",
+        "acoustic noise (particle pressures scatter by about rho0 g H near the wall) and its",
+        "mean is well below the measured plateau; the first-impact spike is a one-frame",
+        "acoustic peak, not comparable with a sensor's reading.  Not met: the plateau within",
+        "20 % (`tests/test_dam_break_impact.py` records it as a strict xfail).",
+        "",
         "| case | resolution | quantity | reference | measured | error |",
         "|---|---|---|---|---|---|",
     ]
@@ -390,6 +515,7 @@ def main():
         "hydrostatic_tank",
         "dam_break",
         "dam_break_antuono",
+        "dam_break_impact",
     ):
         if name in saved:
             lines += ["| " + " | ".join(r) + " |" for r in saved[name]["rows"]]
@@ -400,7 +526,13 @@ def main():
     lines += [""]
     lines += [
         f"![{name}](img/{name}.png)"
-        for name in ("taylor_green_ke", "poiseuille", "hydrostatic", "dam_break_front")
+        for name in (
+            "taylor_green_ke",
+            "poiseuille",
+            "hydrostatic",
+            "dam_break_front",
+            "dam_break_impact",
+        )
     ]
     (DOCS / "validation_fluid.md").write_text("\n".join(lines) + "\n")
     print("\n".join(lines))
