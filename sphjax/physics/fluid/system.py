@@ -152,7 +152,8 @@ def _continuity_with_antuono(pair, a, b, shared, *, h):
 
 def density_gradient(fluid: dict, ctx):
     """Renormalised density gradient ``<grad rho>_a`` over the fluid neighbours
-    (Antuono et al. 2010), ``[n, d]``: two pair sums, then a ``d x d`` solve per particle."""
+    (Antuono et al. 2010), ``[n, d]``: one pair sum (the matrix and the moment of
+    :func:`renormalisation_terms`), then a ``d x d`` solve per particle."""
     rows = {"x": fluid["x"], "rho": fluid["rho"], "V": fluid["m"] / fluid["rho"]}
     sums = ctx.pair_sum(_renormalisation_summand, rows, None, ctx.fluid_pairs, weight="V", parity=1)
     return renormalised_gradient(sums["matrix"], sums["moment"])
