@@ -381,10 +381,12 @@ def turek_hron_csm(
     j = np.arange(-n_up, n + n_up)
     gx, gy = np.meshgrid(x_root + (i + offset) * dx, y_low + (j + offset) * dx, indexing="ij")
     cyl = np.stack([gx.ravel(), gy.ravel()], axis=-1)
+    # lattice sites in the beam's band (its faces included with surface placement)
+    in_band = (cyl[:, 1] > y_low - 0.25 * dx) & (cyl[:, 1] < y_low + thickness + 0.25 * dx)
     if clamp == "cylinder":
         inside = np.linalg.norm(cyl - centre, axis=-1) <= radius
     elif clamp == "strip":
-        inside = (cyl[:, 1] > y_low) & (cyl[:, 1] < y_low + thickness)
+        inside = in_band
     else:
         raise ValueError(f"clamp must be 'cylinder' or 'strip', got {clamp!r}")
     # distance to the beam rectangle [x_root, x_root + L] x [y_low, y_low + H]
@@ -393,7 +395,6 @@ def turek_hron_csm(
     near = np.hypot(gap_x, gap_y) < 2.0 * cutoff
     clamped = cyl[inside & near]
     beam = _strip(x_root + (offset - 0.5) * dx, y_low + (offset - 0.5) * dx, nx, n, dx)
-    in_band = (cyl[:, 1] > y_low - 0.25 * dx) & (cyl[:, 1] < y_low + thickness + 0.25 * dx)
     if clamp == "cylinder" and fill_root:
         # The cylinder's surface lies left of x = 0.25 at the beam's edges (x = 0.24899 at
         # y = 0.19 and 0.21): lattice sites of the beam's band outside the circle are beam
