@@ -1,6 +1,7 @@
 """Antuono et al. (2010, 2012) density diffusion (``sphjax.Antuono``): the per-pair term
 against a double loop over its equations, exact cancellation of linear density fields,
-mass conservation, and a hydrostatic column that stays at rest.  About 40 s in all."""
+mass conservation, the adjoint, and a hydrostatic column that stays at rest.  About 100 s in
+all (load average 6), a third of it the tank."""
 
 from __future__ import annotations
 
