@@ -97,3 +97,17 @@ def test_turek_hron_steady_tip(name):
     assert abs(uy[-1] - uy[-2]) < 0.002 * abs(uy_ref)
     assert uy[-1] == pytest.approx(uy_ref, rel=0.04)
     assert ux[-1] == pytest.approx(ux_ref, rel=0.10)
+
+
+@pytest.mark.parametrize(
+    "bad, name",
+    [
+        (dict(t_end=-1.0, damping_rate=1.0, segments=2), "t_end"),
+        (dict(t_end=1.0, damping_rate=-1.0, segments=2), "damping_rate"),
+        (dict(t_end=1.0, damping_rate=1.0, segments=0), "segments"),
+    ],
+)
+def test_relax_to_rest_bad_input_is_named(bad, name):
+    case = sphjax.cases.turek_hron_csm(n=2)
+    with pytest.raises(ValueError, match=f"^{name} must be"):
+        sphjax.cases.relax_to_rest(case, **bad)
