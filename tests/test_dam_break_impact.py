@@ -91,3 +91,9 @@ def test_pressure_after_impact_matches_experiment(p1):
     t_ref, p_ref = np.array(BUCHNER_P1).T
     expected = np.mean(np.interp(T[window], t_ref, p_ref))
     assert np.mean(p[window]) == pytest.approx(expected, rel=0.2)
+
+
+@pytest.mark.parametrize("bad", [-0.6, 0.0, "tall"])
+def test_bad_column_height_is_named(bad):
+    with pytest.raises(ValueError, match="^column_height must be a positive number"):
+        sphjax.cases.dam_break(n=4, column_height=bad)

@@ -111,3 +111,8 @@ def test_relax_to_rest_bad_input_is_named(bad, name):
     case = sphjax.cases.turek_hron_csm(n=2)
     with pytest.raises(ValueError, match=f"^{name} must be"):
         sphjax.cases.relax_to_rest(case, **bad)
+
+
+def test_turek_hron_bad_placement_is_named():
+    with pytest.raises(ValueError, match="^placement must be 'cell' or 'surface'"):
+        sphjax.cases.turek_hron_csm(n=3, placement="edges")
