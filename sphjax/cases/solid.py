@@ -393,9 +393,11 @@ def turek_hron_csm(
         inside = in_band
     else:
         raise ValueError(f"clamp must be 'cylinder' or 'strip', got {clamp!r}")
-    # distance to the beam rectangle [x_root, x_root + L] x [y_low, y_low + H]
+    # distance to the free beam, the rectangle [x_start, x_root + L] x [y_low, y_low + H]
+    # (an embedded root starts at the cylinder's centre)
+    x_start = centre[0] if embedded_root and clamp == "cylinder" else x_root
     gap_y = np.maximum(0.0, np.maximum(y_low - cyl[:, 1], cyl[:, 1] - (y_low + thickness)))
-    gap_x = np.maximum(0.0, x_root - cyl[:, 0])
+    gap_x = np.maximum(0.0, x_start - cyl[:, 0])
     near = np.hypot(gap_x, gap_y) < 2.0 * cutoff
     clamped = cyl[inside & near]
     beam = _strip(x_root + (offset - 0.5) * dx, y_low + (offset - 0.5) * dx, nx, n, dx)
