@@ -1,6 +1,7 @@
 """Observables: what is measured on a trajectory, apart from the set-ups that produce it.
 
 * :func:`surge_front` — the dam-break surge front ``Z`` (Martin & Moyce 1952);
+* :func:`probe_pressure` — the pressure the fluid exerts at a probe point (a wall sensor);
 * :func:`poiseuille_centreline_speed` — the channel's centre-line speed;
 * :func:`tip_displacement` — the displacement of a solid's tip probe (plate, Turek-Hron);
 * :func:`oscillation_stats` — mean, amplitude and period of a signal.
@@ -13,6 +14,7 @@ from __future__ import annotations
 import jax.numpy as jnp
 import numpy as np
 
+from sphjax.core import kernels
 from sphjax.core.case import Case
 from sphjax.core.state import Kind
 
@@ -43,6 +45,37 @@ def surge_front(states, case: Case):
     fluid = states.kind == Kind.FLUID
     front = jnp.max(jnp.where(fluid, x, -jnp.inf), axis=-1) + 0.5 * case.info["dx"]
     return front / case.info["column_width"]
+
+
+def probe_pressure(states, case: Case, point):
+    """Fluid pressure at a probe ``point`` (a pressure sensor on a wall), the kernel
+    (Shepard) average over the fluid particles within one support of it:
+
+        p(x) = sum_f p_f W(x - x_f) V_f / sum_f W(x - x_f) V_f,     V_f = m_f / rho_f,
+
+    with the case's kernel and smoothing length; 0 where no fluid particle is within the
+    support (the sensor is dry).  Wall particles are left out: their pressure is itself
+    extrapolated from the fluid.  A probe on a wall's face sees fluid on one side only,
+    which the normalisation accounts for.
+
+    Args:
+      states: a State (or a Trajectory's ``states``), with or without a leading time axis.
+      point: ``[d]`` probe position, e.g. ``(case.info["tank_length"], 0.16)`` on the
+        right wall of a dam break.
+    Returns:
+      the pressure, ``[T]`` or a scalar; differentiable (jax.numpy).
+    """
+    states = getattr(states, "states", states)
+    model = case.model
+    point = jnp.asarray(point, states.position.dtype)
+    r = jnp.linalg.norm(states.position - point, axis=-1)
+    fluid = states.kind == Kind.FLUID
+    weight = kernels.W(model.kernel, r, model.smoothing_length, model.dim)
+    weight = jnp.where(fluid & (r < model.cutoff), weight * states.mass / states.density, 0.0)
+    total = jnp.sum(weight, axis=-1)
+    wet = total > 0
+    average = jnp.sum(weight * states.pressure, axis=-1) / jnp.where(wet, total, 1.0)
+    return jnp.where(wet, average, 0.0)
 
 
 def tip_displacement(trajectory, case: Case):

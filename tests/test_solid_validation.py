@@ -56,3 +56,84 @@ def test_turek_hron_csm3_tip():
     assert abs(stats["mean"] / CSM3_UY_MEAN - 1) < 0.10, stats
     assert abs(stats["amplitude"] / CSM3_UY_AMPLITUDE - 1) < 0.10, stats
     assert abs(stats["frequency"] / CSM3_FREQUENCY - 1) < 0.05, stats
+
+
+@pytest.mark.slow
+def test_turek_hron_csm3_tip_reference_setup():
+    """CSM3 with the reference SPH codes' set-up (particles on the faces, h = sqrt(2) dp,
+    root embedded in the cylinder), 9 particles across.  Measured (float32): mean / amplitude
+    / frequency -0.89 % / -3.25 % / +0.79 % at 9 across, -0.86 / -3.22 / +0.86 % at 13,
+    +1.46 / -0.96 / -0.30 % at 17, where the targets of issue 14 (2 / 3 / 1.5 %) are met
+    (docs/validation_solid.md; 17 across is too expensive for CI).  Bounds here: the
+    targets, with 4 % for the amplitude at this resolution."""
+    case = sphjax.cases.turek_hron_csm(
+        n=9, placement="surface", h_factor=2**0.5, embedded_root=True, cfl=0.5
+    )
+    save_every = 50
+    n_steps = save_every * int(np.ceil(2.1 / case.dt / save_every))
+    traj = sphjax.simulate(case, n_steps=n_steps, save_every=save_every)
+    uy = np.asarray(tip_displacement(traj, case))[:, 1]
+    stats = oscillation_stats(np.asarray(traj.times), uy)
+    assert abs(stats["mean"] / CSM3_UY_MEAN - 1) < 0.02, stats
+    assert abs(stats["amplitude"] / CSM3_UY_AMPLITUDE - 1) < 0.04, stats
+    assert abs(stats["frequency"] / CSM3_FREQUENCY - 1) < 0.015, stats
+
+
+# Turek & Hron (2006), CSM1 and CSM2 steady tip displacements (m), E = 1.4e6 / 5.6e6 Pa.
+CSM_STEADY = {"CSM1": (1.4e6, -7.187e-3, -66.10e-3), "CSM2": (5.6e6, -0.469e-3, -16.97e-3)}
+# end time of the damped run (s): settled to about 0.1 % by then (measured at 9 across)
+CSM_STEADY_T_END = {"CSM1": 1.2, "CSM2": 0.9}
+CSM_STEADY_N = 9
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", list(CSM_STEADY))
+def test_turek_hron_steady_tip(name):
+    """CSM1 / CSM2: the static equilibrium under gravity (damped dynamics,
+    ``relax_to_rest``) with the reference SPH codes' set-up (particles on the faces,
+    h = sqrt(2) dp, root embedded in the cylinder), 9 particles across.  Measured there:
+    u_y -3.4 % / -3.3 %, u_x -8.6 % / -8.3 % (u_x is the shortening of the bent beam,
+    about quadratic in u_y); at 17 across see docs/validation_solid.md.  Bounds: u_y 4 %,
+    u_x 10 %, and the beam must have settled (the last two segments, 0.1 s apart, agree to
+    0.2 %).
+    About 30 s each on an idle core."""
+    E, ux_ref, uy_ref = CSM_STEADY[name]
+    case = sphjax.cases.turek_hron_csm(
+        n=CSM_STEADY_N,
+        young_modulus=E,
+        placement="surface",
+        h_factor=2**0.5,
+        embedded_root=True,
+        cfl=0.5,
+    )
+    assert case.info["reference_steady"]["uy"] == uy_ref
+    # damping rate 1.4 * 2 pi f sqrt(E / E_CSM1), f = CSM3's frequency: the beam settles
+    # in about one period without overshooting much
+    rate = 1.4 * 2 * np.pi * 1.0995 * np.sqrt(E / 1.4e6)
+    t_end = CSM_STEADY_T_END[name]
+    _, states = sphjax.cases.relax_to_rest(
+        case, t_end=t_end, damping_rate=rate, segments=int(round(10 * t_end))
+    )
+    ux, uy = np.asarray(tip_displacement(states, case)).T
+    assert abs(uy[-1] - uy[-2]) < 0.002 * abs(uy_ref)
+    assert uy[-1] == pytest.approx(uy_ref, rel=0.04)
+    assert ux[-1] == pytest.approx(ux_ref, rel=0.10)
+
+
+@pytest.mark.parametrize(
+    "bad, name",
+    [
+        (dict(t_end=-1.0, damping_rate=1.0, segments=2), "t_end"),
+        (dict(t_end=1.0, damping_rate=-1.0, segments=2), "damping_rate"),
+        (dict(t_end=1.0, damping_rate=1.0, segments=0), "segments"),
+    ],
+)
+def test_relax_to_rest_bad_input_is_named(bad, name):
+    case = sphjax.cases.turek_hron_csm(n=2)
+    with pytest.raises(ValueError, match=f"^{name} must be"):
+        sphjax.cases.relax_to_rest(case, **bad)
+
+
+def test_turek_hron_bad_placement_is_named():
+    with pytest.raises(ValueError, match="^placement must be 'cell' or 'surface'"):
+        sphjax.cases.turek_hron_csm(n=3, placement="edges")

@@ -65,6 +65,32 @@ KOSHIZUKA_OKA = np.array(
         (3.096, 3.624),
     ]
 )
+# Buchner (2002), PhD thesis TU Delft, pressure sensor P1 (right wall, y = 0.16 m) of the
+# dam break of Zhou et al. (1999) (column 1.2 x 0.6 m, tank 3.22 m), as digitised in
+# TrixiParticles.jl (validation/dam_break_2d/exp_pressure_sensor_P1.csv):
+# (t sqrt(g/H), p / (rho0 g H)), first impact and plateau.
+BUCHNER_P1 = np.array(
+    [
+        (2.42553, -0.01511),
+        (2.47263, 0.07666),
+        (2.49148, 0.15352),
+        (2.55271, 0.26544),
+        (2.61552, 0.37138),
+        (2.65007, 0.56241),
+        (2.68932, 0.66239),
+        (2.77411, 0.68698),
+        (2.83535, 0.67203),
+        (2.90287, 0.66081),
+        (2.96097, 0.64586),
+        (3.02221, 0.64285),
+        (3.13212, 0.57862),
+        (3.23105, 0.54574),
+        (3.36765, 0.54121),
+        (3.51996, 0.54487),
+        (3.67856, 0.54108),
+        (3.90467, 0.54396),
+    ]
+)
 TG_REYNOLDS = (50, 100, 400, 1000)
 
 
@@ -265,8 +291,9 @@ def arrival_lead(T, Z, table):
     return leads
 
 
-def dam_break(n, rows):
-    case = sphjax.cases.dam_break(n=n)
+def dam_break(n, rows, density_diffusion="molteni"):
+    case = sphjax.cases.dam_break(n=n, density_diffusion=density_diffusion)
+    name = "dam_break" if density_diffusion == "molteni" else f"dam_break ({density_diffusion})"
     scale = case.info["time_scale"]
     traj, wall = run(case, 3.0 * scale, frames=120)
     T = np.asarray(traj.times) / scale
@@ -277,7 +304,7 @@ def dam_break(n, rows):
                 z = float(np.interp(T_ref, T, Z))
                 rows.append(
                     (
-                        "dam_break",
+                        name,
                         f"n={n}",
                         f"Z/L at T={T_ref} ({label})",
                         f"{Z_ref}",
@@ -289,7 +316,7 @@ def dam_break(n, rows):
             if T_ref <= 3.0:
                 rows.append(
                     (
-                        "dam_break",
+                        name,
                         f"n={n}",
                         f"lead in T reaching Z/L={Z_ref} ({label})",
                         f"T={T_ref}",
@@ -297,14 +324,105 @@ def dam_break(n, rows):
                         "",
                     )
                 )
+    np.savetxt(
+        DOCS / "figures" / f"dam_break_front_{density_diffusion}_n{n}.csv",
+        np.stack([T, Z], -1),
+        delimiter=",",
+        header="T,Z/L",
+        comments="",
+    )
     plt.figure(figsize=(5, 3.5))
-    plt.plot(T, Z, label=f"sphjax n={n}")
+    for other in ("molteni", "antuono"):
+        path = DOCS / "figures" / f"dam_break_front_{other}_n{n}.csv"
+        if path.exists():
+            data = np.loadtxt(path, delimiter=",", skiprows=1)
+            label = {"molteni": "Molteni & Colagrossi", "antuono": "Antuono et al."}[other]
+            plt.plot(data[:, 0], data[:, 1], label=f"sphjax n={n}, {label}")
     plt.plot(MARTIN_MOYCE[:, 0], MARTIN_MOYCE[:, 1], "ko", label="Martin & Moyce (1952), Table 2")
     plt.plot(
         KOSHIZUKA_OKA[:, 0], KOSHIZUKA_OKA[:, 1], "bs", mfc="none", label="Koshizuka & Oka (1996)"
     )
     plt.xlabel("T = t sqrt(2g/L)"), plt.ylabel("Z / L"), plt.legend(), plt.tight_layout()
     plt.savefig(DOCS / "img" / "dam_break_front.png", dpi=120)
+    plt.close()
+    return wall
+
+
+def dam_break_impact(runs, rows, t_end=3.6):
+    """Pressure on the right wall (sensor P1, y = 0.16 m) of the Zhou/Buchner dam break:
+    arrival of the first impact, peak, and the mean over t sqrt(g/H) in [2.8, 3.5]."""
+    H, g = 0.6, 9.81
+    scale = np.sqrt(H / g)
+    wall = 0.0
+    plt.figure(figsize=(5.5, 3.5))
+    window_ref = np.linspace(2.8, 3.5, 701)
+    mean_ref = float(np.mean(np.interp(window_ref, BUCHNER_P1[:, 0], BUCHNER_P1[:, 1])))
+    for n, diffusion in runs:
+        case = sphjax.cases.dam_break(
+            n=n,
+            column_width=2 * H,
+            column_height=H,
+            tank_length_factor=5.366 / 2,
+            wall_slip="free_slip",
+            artificial_alpha=0.02,
+            density_diffusion=diffusion,
+        )
+        traj, seconds = run(case, t_end * scale, frames=int(t_end / 0.01))
+        wall += seconds
+        T = np.asarray(traj.times) / scale
+        p = np.asarray(
+            sphjax.cases.probe_pressure(traj.states, case, (case.info["tank_length"], 0.16))
+        ) / (1000.0 * g * H)
+        label = f"H/dx={n // 2}, {diffusion}"
+        arrival = float(T[np.argmax(p > 0.15)])
+        window = (T >= 2.8) & (T <= 3.5)
+        k = int(np.argmax(p))
+        rows.append(
+            (
+                "dam_break_impact",
+                label,
+                "P1 arrival (p > 0.15)",
+                "2.49",
+                f"{arrival:.3f}",
+                f"{arrival - 2.49:+.3f}",
+            )
+        )
+        rows.append(
+            (
+                "dam_break_impact",
+                label,
+                "P1 mean over T in [2.8, 3.5]",
+                f"{mean_ref:.3f}",
+                f"{np.mean(p[window]):.3f}",
+                f"{np.mean(p[window]) / mean_ref - 1:+.1%}",
+            )
+        )
+        rows.append(
+            (
+                "dam_break_impact",
+                label,
+                "P1 rms fluctuation over [2.8, 3.5]",
+                "",
+                f"{np.std(p[window]):.3f}",
+                "",
+            )
+        )
+        rows.append(
+            (
+                "dam_break_impact",
+                label,
+                "P1 largest value (time)",
+                "0.687 (2.77)",
+                f"{p[k]:.2f} ({T[k]:.2f})",
+                "",
+            )
+        )
+        plt.plot(T, p, lw=0.8, label=f"sphjax {label}")
+    plt.plot(BUCHNER_P1[:, 0], BUCHNER_P1[:, 1], "ko", ms=3, label="Buchner (2002), P1")
+    plt.xlim(2.2, t_end), plt.ylim(-1.0, 2.0)
+    plt.xlabel("t sqrt(g/H)"), plt.ylabel("p / (rho0 g H)"), plt.legend(fontsize=7)
+    plt.tight_layout()
+    plt.savefig(DOCS / "img" / "dam_break_impact.png", dpi=120)
     plt.close()
     return wall
 
@@ -318,7 +436,13 @@ def main():
     parser.add_argument(
         "--cases",
         nargs="*",
-        default=["taylor_green", "poiseuille", "hydrostatic_tank", "dam_break"],
+        default=[
+            "taylor_green",
+            "poiseuille",
+            "hydrostatic_tank",
+            "dam_break",
+            "dam_break_antuono",
+        ],
         help="cases to rerun (none: only rewrite the page); the others keep their rows "
         "from docs/figures/validation_fluid.json",
     )
@@ -338,6 +462,15 @@ def main():
             wall = hydrostatic(20, rows)
         elif name == "dam_break":
             wall = dam_break(20 if args.quick else 30, rows)
+        elif name == "dam_break_impact":
+            runs = (
+                [(30, "molteni")]
+                if args.quick
+                else [(40, "molteni"), (40, "antuono"), (60, "molteni")]
+            )
+            wall = dam_break_impact(runs, rows)
+        elif name == "dam_break_antuono":
+            wall = dam_break(20 if args.quick else 30, rows, "antuono")
         else:
             raise SystemExit(f"--cases: unknown case {name!r}")
         saved[name] = dict(rows=rows, wall=wall)
@@ -350,11 +483,46 @@ def main():
         "record; Koshizuka & Oka (1996) is their own later experiment (the table often",
         "plotted as Martin & Moyce's); the two differ by up to 7 %.",
         "",
+        "`dam_break (antuono)` is the same run with Antuono et al.'s (2010, 2012) density",
+        'diffusion (`density_diffusion="antuono"`, renormalised density gradient) instead of',
+        "Molteni & Colagrossi's with the hydrostatic correction: the surge front is the same to",
+        "0.1 % of Z and the early-time lead against Martin & Moyce (about 0.17 in T at",
+        "Z/L = 1.44) is unchanged, so the lead does not come from the density diffusion.",
+        "Weakly compressible SPH commonly runs ahead of this experiment early on; Martin &",
+        "Moyce removed a gate (the simulation releases the column instantly) and had wall",
+        "friction.",
+        "",
+        "`dam_break_impact`: the dam break of Zhou et al. (1999) and Buchner (2002) (column",
+        "1.2 m wide and H = 0.6 m high, tank 5.366 H long; `dam_break(column_width=1.2,",
+        'column_height=0.6, tank_length_factor=2.683, wall_slip="free_slip",',
+        "artificial_alpha=0.02)`), pressure on the right wall at sensor P1 (y = 0.16 m) from",
+        "`sphjax.cases.probe_pressure` (kernel average of the fluid's pressure at the wall's",
+        "face), in units of rho0 g H against t sqrt(g/H).  Reference: Buchner's measurement",
+        "of P1 (PhD thesis, TU Delft 2002), as digitised in TrixiParticles.jl.  The impact",
+        "arrives on time, but at these resolutions the pressure after it is dominated by",
+        "acoustic noise (particle pressures scatter by about rho0 g H near the wall) and its",
+        "mean is well below the measured plateau; the first-impact spike is a one-frame",
+        "acoustic peak, not comparable with a sensor's reading.  Not met: the plateau within",
+        "20 % (`tests/test_dam_break_impact.py` records it as a strict xfail).  The sensor's",
+        "definition is not the cause: at H/dx = 20, averaging with twice the smoothing length",
+        "gives 0.20, and also clipping negative particle pressures (as TrixiParticles.jl's",
+        "sensor does) 0.34, the extrapolated wall pressure 0.26 (measured separately).  The",
+        "flow reaching the wall is 2-3 particles deep and runs up it as a sheet one particle",
+        "thick (to y = 1.16 m by t sqrt(g/H) = 3.4): the impact region is resolved by a few",
+        "particles only.",
+        "",
         "| case | resolution | quantity | reference | measured | error |",
         "|---|---|---|---|---|---|",
     ]
     walls = {}
-    for name in ("taylor_green", "poiseuille", "hydrostatic_tank", "dam_break"):
+    for name in (
+        "taylor_green",
+        "poiseuille",
+        "hydrostatic_tank",
+        "dam_break",
+        "dam_break_antuono",
+        "dam_break_impact",
+    ):
         if name in saved:
             lines += ["| " + " | ".join(r) + " |" for r in saved[name]["rows"]]
             walls[name] = saved[name]["wall"]
@@ -364,7 +532,13 @@ def main():
     lines += [""]
     lines += [
         f"![{name}](img/{name}.png)"
-        for name in ("taylor_green_ke", "poiseuille", "hydrostatic", "dam_break_front")
+        for name in (
+            "taylor_green_ke",
+            "poiseuille",
+            "hydrostatic",
+            "dam_break_front",
+            "dam_break_impact",
+        )
     ]
     (DOCS / "validation_fluid.md").write_text("\n".join(lines) + "\n")
     print("\n".join(lines))

@@ -33,12 +33,14 @@ from sphjax.cases.solid import (
     plate_mode_shape,
     plate_reference,
     plate_sound_speed,
+    relax_to_rest,
     turek_hron_csm,
 )
 from sphjax.cases.solid3d import beam_angular_frequency, cantilever_3d, cantilever_reference
 from sphjax.observables import (
     oscillation_stats,
     poiseuille_centreline_speed,
+    probe_pressure,
     surge_front,
     tip_displacement,
 )
@@ -97,8 +99,10 @@ __all__ = [
     "hydrostatic_tank",
     "dam_break",
     "surge_front",
+    "probe_pressure",
     "oscillating_plate",
     "turek_hron_csm",
+    "relax_to_rest",
     "tip_displacement",
     "oscillation_stats",
     "plate_mode_shape",

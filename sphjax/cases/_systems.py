@@ -5,14 +5,14 @@ from __future__ import annotations
 from sphjax.physics.boundary.system import WallSystem
 from sphjax.physics.boundary.wall import AdamiBoundary
 from sphjax.physics.fluid.density import ContinuityDensity, SummationDensity
-from sphjax.physics.fluid.density_diffusion import MolteniColagrossi
+from sphjax.physics.fluid.density_diffusion import Antuono, MolteniColagrossi
 from sphjax.physics.fluid.eos import TaitEOS
 from sphjax.physics.fluid.momentum import TransportVelocity
 from sphjax.physics.fluid.system import FluidSystem
 from sphjax.physics.fluid.viscosity import ArtificialViscosity, MorrisViscosity
 
 DENSITIES = {"summation": SummationDensity(), "continuity": ContinuityDensity()}
-DIFFUSIONS = {None: None, "molteni": MolteniColagrossi()}
+DIFFUSIONS = {None: None, "molteni": MolteniColagrossi(), "antuono": Antuono()}
 SLIPS = ("no_slip", "free_slip")
 
 
@@ -24,13 +24,16 @@ def fluid_system(
     physical_viscosity: bool = False,
     density_diffusion: str | None = None,
     transport_velocity: bool = False,
+    transport_pressure_factor: float = 1.0,
 ) -> FluidSystem:
     """A :class:`FluidSystem` from a case's arguments (``density`` is ``"summation"`` or
-    ``"continuity"``, ``density_diffusion`` ``None`` or ``"molteni"``)."""
+    ``"continuity"``, ``density_diffusion`` ``None``, ``"molteni"`` or ``"antuono"``)."""
     if density not in DENSITIES:
         raise ValueError(f"density must be 'summation' or 'continuity', got {density!r}")
     if density_diffusion not in DIFFUSIONS:
-        raise ValueError(f"density_diffusion must be None or 'molteni', got {density_diffusion!r}")
+        raise ValueError(
+            f"density_diffusion must be None, 'molteni' or 'antuono', got {density_diffusion!r}"
+        )
     viscosity = (ArtificialViscosity(),) * bool(artificial_viscosity) + (MorrisViscosity(),) * bool(
         physical_viscosity
     )
@@ -39,7 +42,11 @@ def fluid_system(
         density=DENSITIES[density],
         viscosity=viscosity,
         density_diffusion=DIFFUSIONS[density_diffusion],
-        transport_velocity=TransportVelocity() if transport_velocity else None,
+        transport_velocity=(
+            TransportVelocity(pressure_factor=transport_pressure_factor)
+            if transport_velocity
+            else None
+        ),
     )
 
 

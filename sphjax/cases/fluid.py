@@ -88,11 +88,19 @@ def taylor_green(
 
     The initial density and masses follow ``params.sound_speed``,
     ``params.reference_density`` and ``params.reference_pressure``
-    (``case.state_for(params)``; ``simulate(case, params)`` uses it).
+    (``case.state_for(params)``; ``simulate(case, params)`` uses it), and so does the
+    transport-velocity background pressure ``p_b = transport_pressure_factor * rho0 c0^2``
+    (:class:`~sphjax.TransportVelocity` evaluates it from Params).  The reference pressure
+    ``p0 = reference_pressure_factor * rho0 c0^2`` is computed once, when the case is
+    built, and stored as ``Params.reference_pressure``: after ``replace(sound_speed=...)``
+    set ``reference_pressure`` too if it should scale with ``c0^2``.
 
     Args:
       n: particles per side (``dx = 1 / n``).
-      reference_pressure_factor: ``p0 = factor * rho0 c0^2`` added to the pressure.
+      reference_pressure_factor: ``p0 = factor * rho0 c0^2`` added to the pressure (at
+        build time).
+      transport_pressure_factor: the transport-velocity background pressure
+        ``p_b = factor * rho0 c0^2``, evaluated from Params in every step.
       disorder: largest random displacement from the lattice, in units of ``dx``.
       seed: seed of that displacement.
       relax_iterations: pseudo-time steps of the packing (0: none).
@@ -133,7 +141,6 @@ def taylor_green(
         kinematic_viscosity=nu,
         reference_pressure=p0,
         artificial_alpha=artificial_alpha,
-        transport_pressure=transport_pressure_factor * rho0 * c0**2,
     )
 
     def initial_state(p):
@@ -160,6 +167,7 @@ def taylor_green(
                 physical_viscosity=True,
                 density_diffusion=density_diffusion,
                 transport_velocity=transport_velocity,
+                transport_pressure_factor=transport_pressure_factor,
             ),
         ),
     )
@@ -326,12 +334,15 @@ def hydrostatic_tank(
     gravity: float = 9.81,
     sound_speed_factor: float = 10.0,
     artificial_alpha: float = 0.1,
+    density_diffusion: str | None = "molteni",
     t_end: float = 2.0,
 ) -> Case:
     """A water column of depth ``H`` at rest in a tank: ``p = rho0 g (H - y)``.
 
     Args:
       n: particles over the depth (``dx = H / n``).
+      density_diffusion: ``"molteni"`` (Molteni & Colagrossi 2009 with the hydrostatic
+        correction), ``"antuono"`` (Antuono et al. 2010) or ``None``.
     """
     n = check_resolution("n", n, 4)
     H = check_positive("height", height)
@@ -359,7 +370,7 @@ def hydrostatic_tank(
             density="continuity",
             gamma=7.0,
             artificial_viscosity=True,
-            density_diffusion="molteni",
+            density_diffusion=density_diffusion,
         ),
         "no_slip",
         t_end,
@@ -371,6 +382,7 @@ def hydrostatic_tank(
 def dam_break(
     n: int = 20,
     column_width: float = 0.3,
+    column_height: float | None = None,
     tank_length_factor: float = 5.0,
     gravity: float = 9.81,
     sound_speed_factor: float = 20.0,
@@ -387,14 +399,23 @@ def dam_break(
     ``alpha = 0.1`` (the experiment had wall friction; free-slip walls with ``alpha = 0.02``
     run 12-17 % ahead of it at ``T = 2-2.3``, see docs/validation.md).
 
+    The other common set-up, with a pressure probe on the right wall (Zhou et al. 1999,
+    Buchner 2002, Colagrossi & Landrini 2003): ``column_width=1.2, column_height=0.6,
+    tank_length_factor=2.6833`` (a tank 5.366 H long); measure the wall pressure with
+    :func:`sphjax.observables.probe_pressure` at ``(case.info["tank_length"], y)``.
+
     Args:
       n: particles across the column width (``dx = L / n``).
+      column_height: ``H`` (default ``2 L``, Martin & Moyce's column).
     """
     n = check_resolution("n", n, 4)
     L = check_positive("column_width", column_width)
     g = check_positive("gravity", gravity)
     dx = L / n
-    H = 2.0 * L
+    if column_height is None:
+        H = 2.0 * L
+    else:
+        H = dx * max(1, round(check_positive("column_height", column_height) / dx))
     kernel, h = WendlandC2(), 1.5 * dx
     rho0 = 1000.0
     c0 = sound_speed_factor * math.sqrt(g * H)
@@ -414,7 +435,7 @@ def dam_break(
     return _tank(
         "dam_break",
         fluid,
-        (tank_length, 1.25 * H),
+        (tank_length, 1.25 * max(H, L)),
         dx,
         kernel,
         h,

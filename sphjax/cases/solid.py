@@ -3,7 +3,8 @@
 * :func:`oscillating_plate` — Gray, Monaghan & Swift (2001) cantilever plate, clamped over
   an extra length, released with the first bending mode as velocity profile.
 * :func:`turek_hron_csm` — the Turek & Hron (2006) CSM beam behind a rigid cylinder under
-  gravity (CSM3: from rest, undamped).
+  gravity (CSM3: from rest, undamped; CSM1 and CSM2: its static equilibrium for two
+  Young's moduli, found with :func:`relax_to_rest`).
 
 Both return a :class:`sphjax.Case` whose ``info`` holds ``tip_index`` (the probe particle,
 on the beam's centre line at its free end), ``tip_indices`` (the one or two particles the
@@ -16,6 +17,7 @@ from __future__ import annotations
 
 import math
 
+import jax
 import jax.numpy as jnp
 import numpy as np
 
@@ -25,6 +27,7 @@ from sphjax.core.kernels import as_kernel
 from sphjax.core.model import Domain, Model
 from sphjax.core.params import make_params
 from sphjax.core.state import Kind, make_state
+from sphjax.integration.simulate import simulate
 from sphjax.integration.timestep import stable_time_step
 from sphjax.physics.solid.penalty import PenaltyForce
 from sphjax.physics.solid.system import SolidSystem
@@ -261,6 +264,46 @@ TUREK_HRON_CSM3 = dict(
 )
 
 
+# Turek & Hron (2006) CSM1 and CSM2, steady tip displacements (m): the static equilibrium
+# under gravity with E = 1.4e6 and 5.6e6 Pa (rho = 1000, nu = 0.4, g = 2 m/s^2).
+TUREK_HRON_STEADY = {
+    1.4e6: dict(name="CSM1", ux=-7.187e-3, uy=-66.10e-3),
+    5.6e6: dict(name="CSM2", ux=-0.469e-3, uy=-16.97e-3),
+}
+
+
+def relax_to_rest(case: Case, params=None, *, t_end: float, damping_rate: float, segments: int):
+    """Static equilibrium of a solid case by damped dynamics (dynamic relaxation).
+
+    Runs ``case`` to ``t_end`` in ``segments`` equal runs of :func:`sphjax.simulate`,
+    multiplying the velocities by ``exp(-damping_rate * t_segment)`` after each: a
+    velocity damping ``-c v`` with ``c = damping_rate`` applied in discrete steps.  The
+    damping only acts on velocities, so an equilibrium of the undamped equations is one of
+    the damped ones.  For Turek-Hron, ``c = 1.4 * 2 pi 1.0995 Hz * sqrt(E / 1.4e6)`` settles
+    the tip to about 0.1 % in 1.2 s (CSM1) and 0.9 s (CSM2) (docs/validation_solid.md).
+
+    Returns:
+      ``(times, states)``: the end time of each segment and its final State (stacked).
+    """
+    check_positive("t_end", t_end)
+    if not (isinstance(damping_rate, int | float) and damping_rate >= 0):
+        raise ValueError(f"damping_rate must be a number >= 0 (1/s), got {damping_rate!r}")
+    if not (isinstance(segments, int) and segments >= 1):
+        raise ValueError(f"segments must be a whole number >= 1, got {segments!r}")
+    params = case.params if params is None else params
+    state = case.state_for(params)
+    n_steps = max(1, int(round(t_end / case.dt / segments)))
+    factor = math.exp(-damping_rate * n_steps * case.dt)
+    times, finals = [], []
+    for k in range(segments):
+        final = simulate(case, params, state=state, n_steps=n_steps).final
+        state = final.replace(velocity=final.velocity * factor)
+        times.append((k + 1) * n_steps * case.dt)
+        finals.append(final)
+    stacked = jax.tree_util.tree_map(lambda *leaves: jnp.stack(leaves), *finals)
+    return np.asarray(times), stacked
+
+
 def turek_hron_csm(
     n: int = 12,
     young_modulus: float = 1.4e6,
@@ -274,6 +317,8 @@ def turek_hron_csm(
     t_end: float = 2.0,
     clamp: str = "cylinder",
     fill_root: bool = True,
+    placement: str = "cell",
+    embedded_root: bool = False,
 ) -> Case:
     """Turek-Hron CSM beam (CSM3 with the defaults): elastic beam behind a rigid cylinder.
 
@@ -286,6 +331,12 @@ def turek_hron_csm(
     those within two kernel supports of the beam, the rest cannot influence it).  So the
     beam's root sits against the cylinder's curved surface as in the benchmark, and the
     clamped particles share the beam's regular spacing.
+
+    CSM1 and CSM2 are the static equilibria for ``young_modulus=1.4e6`` and ``5.6e6``
+    (``case.info["reference_steady"]`` holds their tip displacements): run
+    :func:`relax_to_rest`.  Their most accurate set-up here is the one of the reference
+    SPH codes, ``placement="surface", h_factor=2 ** 0.5, embedded_root=True``
+    (docs/validation_solid.md).
 
     Args:
       n: particles across the beam thickness 0.02 (``dx = 0.02 / n``).
@@ -302,8 +353,19 @@ def turek_hron_csm(
         root's outer fibres at some resolutions (one site per edge at 12 particles
         across, two at 16) and adds 2.6 % and 6 % of the CSM3 mean deflection there
         (docs/validation_solid.md).
+      placement: ``"cell"`` (particles at the centres of ``n x n_x`` square cells that tile
+        the beam, spacing ``H / n``; the default) or ``"surface"`` (``n`` rows with the
+        outer ones *on* the beam's faces and a column on the tip, spacing ``H / (n - 1)``,
+        as TrixiParticles.jl and DualSPHysics set the benchmark up; use an odd ``n`` so a
+        row lies on the centre line).
+      embedded_root: with ``clamp="cylinder"``, also make the beam's band inside the
+        cylinder's right half free particles (the beam runs on into the cylinder up to its
+        centre, held by the clamped particles above and below it), as TrixiParticles.jl
+        does; default ``False`` (the beam is clamped at the cylinder's surface).
     """
-    n = check_resolution("n", n, 2)
+    if placement not in ("cell", "surface"):
+        raise ValueError(f"placement must be 'cell' or 'surface', got {placement!r}")
+    n = check_resolution("n", n, 2 if placement == "cell" else 3)
     E = check_positive("young_modulus", young_modulus)
     rho = check_positive("density", density)
     if not gravity >= 0:
@@ -311,8 +373,10 @@ def turek_hron_csm(
     centre, radius = np.array([0.2, 0.2]), 0.05
     x_root, thickness, length = 0.25, 0.02, 0.35
     y_low = 0.2 - 0.5 * thickness
-    dx = thickness / n
-    nx = int(round(length / dx))
+    surface = placement == "surface"
+    dx = thickness / (n - 1) if surface else thickness / n
+    nx = int(round(length / dx)) + (1 if surface else 0)
+    offset = 0.0 if surface else 0.5  # lattice sites at (i + offset) dx from the root
     kernel = as_kernel(kernel)
     h = h_factor * dx
     cutoff = kernel.support * h
@@ -320,27 +384,35 @@ def turek_hron_csm(
     n_up = int(math.ceil((radius + 2.0 * cutoff) / dx))
     i = np.arange(-n_back, 0)
     j = np.arange(-n_up, n + n_up)
-    gx, gy = np.meshgrid(x_root + (i + 0.5) * dx, y_low + (j + 0.5) * dx, indexing="ij")
+    gx, gy = np.meshgrid(x_root + (i + offset) * dx, y_low + (j + offset) * dx, indexing="ij")
     cyl = np.stack([gx.ravel(), gy.ravel()], axis=-1)
+    # lattice sites in the beam's band (its faces included with surface placement)
+    in_band = (cyl[:, 1] > y_low - 0.25 * dx) & (cyl[:, 1] < y_low + thickness + 0.25 * dx)
     if clamp == "cylinder":
         inside = np.linalg.norm(cyl - centre, axis=-1) <= radius
     elif clamp == "strip":
-        inside = (cyl[:, 1] > y_low) & (cyl[:, 1] < y_low + thickness)
+        inside = in_band
     else:
         raise ValueError(f"clamp must be 'cylinder' or 'strip', got {clamp!r}")
-    # distance to the beam rectangle [x_root, x_root + L] x [y_low, y_low + H]
+    # distance to the free beam, the rectangle [x_start, x_root + L] x [y_low, y_low + H]
+    # (an embedded root starts at the cylinder's centre)
+    x_start = centre[0] if embedded_root and clamp == "cylinder" else x_root
     gap_y = np.maximum(0.0, np.maximum(y_low - cyl[:, 1], cyl[:, 1] - (y_low + thickness)))
-    gap_x = np.maximum(0.0, x_root - cyl[:, 0])
+    gap_x = np.maximum(0.0, x_start - cyl[:, 0])
     near = np.hypot(gap_x, gap_y) < 2.0 * cutoff
     clamped = cyl[inside & near]
-    beam = _strip(x_root, y_low, nx, n, dx)
+    beam = _strip(x_root + (offset - 0.5) * dx, y_low + (offset - 0.5) * dx, nx, n, dx)
     if clamp == "cylinder" and fill_root:
         # The cylinder's surface lies left of x = 0.25 at the beam's edges (x = 0.24899 at
         # y = 0.19 and 0.21): lattice sites of the beam's band outside the circle are beam
         # material.  Left out, they would leave a notch at the root's outer fibres, where
         # the bending stress is largest, whenever a site falls between the arc and 0.25.
-        band = (cyl[:, 1] > y_low) & (cyl[:, 1] < y_low + thickness) & (cyl[:, 0] > centre[0])
-        beam = np.concatenate([cyl[band & ~inside], beam])
+        band = in_band & (cyl[:, 0] > centre[0])
+        free = band & ~inside
+        if embedded_root:
+            free = free | (band & inside & (cyl[:, 0] >= centre[0] - 1e-9))
+        beam = np.concatenate([cyl[free], beam])
+        clamped = cyl[inside & near & ~free]
     x = np.concatenate([beam, clamped])
     kind = np.concatenate([np.full(len(beam), Kind.SOLID), np.full(len(clamped), Kind.CLAMPED)])
     kind = kind.astype(np.int32)
@@ -362,5 +434,6 @@ def turek_hron_csm(
         tip_point=(0.6, 0.2),
         centre_line=0.2,
         reference=dict(TUREK_HRON_CSM3),
+        reference_steady=dict(TUREK_HRON_STEADY[E]) if E in TUREK_HRON_STEADY else None,
     )
     return _finish("turek_hron_csm", x, 0.0, kind, dx, rho, model, params, t_end, info, cfl)

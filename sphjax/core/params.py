@@ -36,8 +36,9 @@ class FluidParams:
       artificial_beta: Monaghan ``beta`` (quadratic term).
       kinematic_viscosity: physical kinematic viscosity ``nu`` (Morris et al. 1997).
       background_pressure: ``p_background`` subtracted in eq. 12.
-      transport_pressure: background pressure ``p_b`` of the transport-velocity
-        formulation (Adami, Hu & Adams 2013).
+      transport_pressure: added to the transport-velocity background pressure
+        ``p_b = TransportVelocity.pressure_factor * rho0 c0^2 + transport_pressure``
+        (Adami, Hu & Adams 2013); 0 by default, so ``p_b = rho0 c0^2``.
       reference_pressure: ``p0`` added in eq. 12.
       density_diffusion: delta-SPH coefficient ``delta``.
     """

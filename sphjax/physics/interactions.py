@@ -63,14 +63,18 @@ def _hydrodynamic_summand(pair, a, b, shared, *, h, artificial, morris, stress, 
     return out
 
 
-def _fluid_shared(ctx):
+def _fluid_shared(system: FluidSystem, ctx):
+    """The parameters every fluid pair sees; the transport-velocity background pressure
+    ``p_b`` is derived from them here (it follows ``sound_speed``)."""
     fluid = ctx.params.fluid
+    tvf = system.transport_velocity
+    p_transport = 0.0 if tvf is None else tvf.background_pressure(fluid)
     return (
         fluid.sound_speed,
         fluid.artificial_alpha,
         fluid.artificial_beta,
         fluid.kinematic_viscosity,
-        fluid.transport_pressure,
+        p_transport,
     )
 
 
@@ -95,7 +99,9 @@ def fluid_fluid(system: FluidSystem, fluid, _other, _fluid, pairs, ctx):
         viscous=True,
     )
     rows = _fluid_rows(fluid, stress)
-    return ctx.pair_sum(summand, rows, None, pairs, _fluid_shared(ctx), weight="m", parity=-1)
+    return ctx.pair_sum(
+        summand, rows, None, pairs, _fluid_shared(system, ctx), weight="m", parity=-1
+    )
 
 
 def fluid_wall(system: FluidSystem, fluid, wall_system: WallSystem, wall, pairs, ctx):
@@ -113,7 +119,7 @@ def fluid_wall(system: FluidSystem, fluid, wall_system: WallSystem, wall, pairs,
     cols = {"x": wall["x"], "m": wall["m"], "rho": wall["rho"], "p": wall["p"]}
     cols["vv"] = wall["v_viscous"]
     rows = _fluid_rows(fluid, False)
-    return ctx.pair_sum(summand, rows, cols, pairs, _fluid_shared(ctx), weight="m")
+    return ctx.pair_sum(summand, rows, cols, pairs, _fluid_shared(system, ctx), weight="m")
 
 
 def _solid_summand(pair, a, b, shared, *, domain, penalty):

@@ -31,6 +31,37 @@ def transport_stress_acceleration(pair, mass_b, density_a, density_b, v_a, v_b, 
 @dataclasses.dataclass(frozen=True)
 class TransportVelocity:
     """Advect fluid particles with the transport velocity of Adami, Hu & Adams (2013),
-    ``v~ = v + dt/2 a_b``, where ``a_b`` is eq. 10's pressure term with the uniform
-    background pressure ``Params.transport_pressure``; keeps the particle distribution
-    regular (needed for Taylor-Green)."""
+    ``v~ = v + dt/2 a_b``, where ``a_b`` is eq. 10's pressure term with a uniform
+    background pressure; keeps the particle distribution regular (needed for
+    Taylor-Green).
+
+    The background pressure is evaluated from Params at every right-hand side,
+
+        p_b = pressure_factor * rho0 c0^2 + Params.transport_pressure,
+
+    so that it follows ``params.replace(sound_speed=...)`` (and ``jax.grad`` with respect
+    to ``sound_speed`` or ``reference_density`` sees it).  The default ``pressure_factor=1``
+    is Adami et al.'s ``p_b = rho0 c0^2``; ``pressure_factor=0`` makes ``p_b`` the
+    parameter ``Params.transport_pressure`` alone.
+    """
+
+    pressure_factor: float = 1.0
+
+    def __post_init__(self):
+        try:
+            factor = float(self.pressure_factor)
+        except (TypeError, ValueError):
+            factor = float("nan")
+        if not (factor >= 0.0 and factor < float("inf")):
+            raise ValueError(
+                "TransportVelocity.pressure_factor must be a finite number >= 0 "
+                f"(p_b = factor * rho0 c0^2 + transport_pressure), got {self.pressure_factor!r}"
+            )
+        object.__setattr__(self, "pressure_factor", factor)
+
+    def background_pressure(self, fluid):
+        """``p_b = pressure_factor * rho0 c0^2 + transport_pressure`` from ``Params.fluid``."""
+        return (
+            self.pressure_factor * fluid.reference_density * fluid.sound_speed**2
+            + fluid.transport_pressure
+        )

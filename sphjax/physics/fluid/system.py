@@ -3,7 +3,9 @@
 Governing equations (formulation eqs. 5, 10-12):
 
     rho_a = sum_b m_b W_ab                                   (summation, eq. 5), or
-    Drho_a/Dt = sum_b m_b v_ab . grad_a W_ab [+ D_a]         (continuity, eq. 11; delta-SPH)
+    Drho_a/Dt = sum_b m_b v_ab . grad_a W_ab [+ D_a]         (continuity, eq. 11; delta-SPH,
+                                                             Molteni & Colagrossi 2009 or
+                                                             Antuono et al. 2010)
     p_a = p(rho_a)                                           (equation of state, eq. 12)
     Dv_a/Dt = - sum_b m_b (p_a / rho_a^2 + p_b / rho_b^2 + Pi_ab) grad_a W_ab
               + viscous terms + g                            (eq. 10)
@@ -29,7 +31,14 @@ from sphjax.physics.fluid.density import (
     continuity_term,
     summation_term,
 )
-from sphjax.physics.fluid.density_diffusion import MolteniColagrossi, molteni_term
+from sphjax.physics.fluid.density_diffusion import (
+    Antuono,
+    MolteniColagrossi,
+    antuono_term,
+    molteni_term,
+    renormalisation_terms,
+    renormalised_gradient,
+)
 from sphjax.physics.fluid.eos import TaitEOS
 from sphjax.physics.fluid.momentum import TransportVelocity
 from sphjax.physics.fluid.viscosity import ArtificialViscosity, MorrisViscosity
@@ -45,8 +54,8 @@ class FluidSystem:
         :class:`~sphjax.ContinuityDensity` (eq. 11).
       viscosity: the viscous terms of eq. 10, a tuple of
         :class:`~sphjax.ArtificialViscosity` and/or :class:`~sphjax.MorrisViscosity`.
-      density_diffusion: ``None`` or :class:`~sphjax.MolteniColagrossi` (with
-        continuity density).
+      density_diffusion: ``None``, :class:`~sphjax.MolteniColagrossi` or
+        :class:`~sphjax.Antuono` (with continuity density).
       transport_velocity: ``None`` or :class:`~sphjax.TransportVelocity`.
     """
 
@@ -73,9 +82,10 @@ class FluidSystem:
             )
         object.__setattr__(self, "viscosity", viscosity)
         if self.density_diffusion is not None:
-            if not isinstance(self.density_diffusion, MolteniColagrossi):
+            if not isinstance(self.density_diffusion, MolteniColagrossi | Antuono):
                 raise ValueError(
-                    "FluidSystem.density_diffusion must be None or MolteniColagrossi(), "
+                    "FluidSystem.density_diffusion must be None, MolteniColagrossi() or "
+                    "Antuono(), "
                     f"got {self.density_diffusion!r}"
                 )
             if not isinstance(self.density, ContinuityDensity):
@@ -123,6 +133,32 @@ def _continuity_with_diffusion(pair, a, b, shared, *, h):
     return rate + molteni_term(pair, a["rho"], b["rho"], volume_b, hydrostatic, delta, h, c0)
 
 
+def _renormalisation_summand(pair, a, b, shared):
+    """Per pair, times the weight ``V_b``: the sums of the renormalised density gradient
+    (Antuono et al. 2010); symmetric under ``a <-> b``."""
+    return renormalisation_terms(pair, a["rho"], b["rho"])
+
+
+def _continuity_with_antuono(pair, a, b, shared, *, h):
+    """Eq. 11 plus Antuono et al.'s diffusion per pair, with the renormalised density
+    gradients ``a["grad_rho"]``, ``b["grad_rho"]`` of the update stage."""
+    c0, delta = shared
+    rate = continuity_term(pair, b["m"], a["v"], b["v"])
+    volume_b = b["m"] / b["rho"]
+    return rate + antuono_term(
+        pair, a["rho"], b["rho"], a["grad_rho"], b["grad_rho"], volume_b, delta, h, c0
+    )
+
+
+def density_gradient(fluid: dict, ctx):
+    """Renormalised density gradient ``<grad rho>_a`` over the fluid neighbours
+    (Antuono et al. 2010), ``[n, d]``: one pair sum (the matrix and the moment of
+    :func:`renormalisation_terms`), then a ``d x d`` solve per particle."""
+    rows = {"x": fluid["x"], "rho": fluid["rho"], "V": fluid["m"] / fluid["rho"]}
+    sums = ctx.pair_sum(_renormalisation_summand, rows, None, ctx.fluid_pairs, weight="V", parity=1)
+    return renormalised_gradient(sums["matrix"], sums["moment"])
+
+
 def update_fluid(system: FluidSystem, fluid: dict, boundaries, ctx, density_step=None):
     """Update stage of a fluid: density (eq. 5 or 11 with delta-SPH) and pressure (eq. 12).
 
@@ -149,6 +185,11 @@ def update_fluid(system: FluidSystem, fluid: dict, boundaries, ctx, density_step
             rate = ctx.pair_sum(
                 _velocity_divergence_summand, rows, None, ctx.fluid_pairs, weight="m", parity=1
             )
+        elif isinstance(system.density_diffusion, Antuono):
+            summand = functools.partial(_continuity_with_antuono, h=geometry.smoothing_length)
+            with_gradient = {**rows, "grad_rho": density_gradient(fluid, ctx)}
+            shared = (params.sound_speed, params.density_diffusion)
+            rate = ctx.pair_sum(summand, with_gradient, None, ctx.fluid_pairs, shared)
         else:
             summand = functools.partial(_continuity_with_diffusion, h=geometry.smoothing_length)
             shared = (

@@ -1,0 +1,99 @@
+"""Dam-break impact on the right wall against Buchner's (2002) experiment (slow).
+
+Set-up of Zhou et al. (1999), Buchner (2002) and Colagrossi & Landrini (2003): a column
+``2H`` wide and ``H = 0.6 m`` high at the left of a tank ``5.366 H`` long; pressure sensor
+P1 on the right wall at ``y = 0.16 m``.  Free-slip walls and Monaghan ``alpha = 0.02``, as
+the reference SPH runs of this case use.  The probe is
+:func:`sphjax.observables.probe_pressure` (kernel average of the fluid's pressure) at the
+wall's face.  CI size: H / dx = 15; about 60 s on an idle core.
+
+Reference: B. Buchner, "Green water on ship-type offshore structures", PhD thesis, TU Delft
+(2002), sensor P1, as digitised in TrixiParticles.jl (validation/dam_break_2d/
+exp_pressure_sensor_P1.csv): ``(t sqrt(g / H), p / (rho0 g H))``.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+import sphjax
+from sphjax.cases import probe_pressure
+
+pytestmark = pytest.mark.slow
+
+H, G = 0.6, 9.81
+P1_HEIGHT = 0.16
+# Buchner (2002), P1: the rise of the first impact and the plateau after it.
+BUCHNER_P1 = [
+    (2.42553, -0.01511),
+    (2.47263, 0.07666),
+    (2.49148, 0.15352),
+    (2.55271, 0.26544),
+    (2.61552, 0.37138),
+    (2.65007, 0.56241),
+    (2.68932, 0.66239),
+    (2.77411, 0.68698),
+    (2.83535, 0.67203),
+    (2.90287, 0.66081),
+    (2.96097, 0.64586),
+    (3.02221, 0.64285),
+    (3.13212, 0.57862),
+    (3.23105, 0.54574),
+    (3.36765, 0.54121),
+    (3.51996, 0.54487),
+]
+ARRIVAL = 2.49  # first time P1 reads more than 0.15 rho0 g H
+
+
+@pytest.fixture(scope="module")
+def p1():
+    case = sphjax.cases.dam_break(
+        n=30,
+        column_width=2 * H,
+        column_height=H,
+        tank_length_factor=5.366 / 2,
+        wall_slip="free_slip",
+        artificial_alpha=0.02,
+    )
+    scale = math.sqrt(H / G)
+    save_every = max(1, int(0.01 * scale / case.dt))
+    n_steps = save_every * int(3.5 * scale / case.dt / save_every)
+    traj = sphjax.simulate(case, n_steps=n_steps, save_every=save_every)
+    wall = (case.info["tank_length"], P1_HEIGHT)
+    T = np.asarray(traj.times) / scale
+    p = np.asarray(probe_pressure(traj.states, case, wall)) / (1000.0 * G * H)
+    return T, p
+
+
+def test_impact_arrives_at_the_sensor_in_time(p1):
+    """The sensor is dry until the surge arrives, and the first impact reaches it within
+    0.1 (4 %) of the experiment's time, t sqrt(g/H) = 2.49: the surge front's arrival,
+    which the Martin & Moyce comparison validates to a few per cent at these times."""
+    T, p = p1
+    assert np.all(p[T < 2.3] == 0.0)
+    arrival = T[np.argmax(p > 0.15)]
+    assert arrival == pytest.approx(ARRIVAL, abs=0.1)
+
+
+@pytest.mark.xfail(
+    strict=True,
+    reason="the pressure after the impact is noisy and low at this resolution: mean "
+    "0.1-0.3 rho0 g H over t sqrt(g/H) in [2.8, 3.5] against the experiment's 0.59 "
+    "(docs/validation_fluid.md)",
+)
+def test_pressure_after_impact_matches_experiment(p1):
+    """Mean P1 pressure over t sqrt(g/H) in [2.8, 3.5] within 20 % of Buchner's (0.59)."""
+    T, p = p1
+    window = (T >= 2.8) & (T <= 3.5)
+    t_ref, p_ref = np.array(BUCHNER_P1).T
+    expected = np.mean(np.interp(T[window], t_ref, p_ref))
+    assert np.mean(p[window]) == pytest.approx(expected, rel=0.2)
+
+
+@pytest.mark.parametrize("bad", [-0.6, 0.0, "tall"])
+def test_bad_column_height_is_named(bad):
+    with pytest.raises(ValueError, match="^column_height must be a positive number"):
+        sphjax.cases.dam_break(n=4, column_height=bad)
