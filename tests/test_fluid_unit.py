@@ -172,3 +172,17 @@ def test_fluid_rows_against_walls_are_compacted_without_changing_the_run():
     assert moved > 0.05  # the column has collapsed
     assert float(jnp.max(jnp.abs(chunked.position - traced.position))) < 1e-10
     assert float(jnp.max(jnp.abs(chunked.velocity - traced.velocity))) < 1e-8
+
+
+@pytest.mark.parametrize("n", [5, 20, 21])
+def test_dam_break_tank_is_open_at_the_top(n):
+    """No wall particle closes the tank: at odd n a lattice row fell exactly on the tank's
+    height and became a lid of wall particles (105 of them at n = 21)."""
+    case = sphjax.cases.dam_break(n=n)
+    x, kind = np.asarray(case.state.position), np.asarray(case.state.kind)
+    top = 1.25 * case.info["column_height"]
+    lid = (kind == Kind.WALL) & (x[:, 1] >= top - 1e-9)
+    lid &= (x[:, 0] > 0.0) & (x[:, 0] < case.info["tank_length"])
+    assert int(lid.sum()) == 0
+    # side walls still reach the top
+    assert float(x[kind == Kind.WALL, 1].max()) == pytest.approx(top, abs=case.info["dx"])

@@ -36,7 +36,11 @@ def box_walls(inner_lower, inner_upper, dx, layers, open_top=False) -> np.ndarra
     if open_top:
         outer_upper[-1] = inner_upper[-1]
     points = lattice(inner_lower - pad, outer_upper, dx)
-    inside = np.all((points > inner_lower) & (points < inner_upper), axis=-1)
+    between = (points > inner_lower) & (points < inner_upper)
+    if open_top:
+        # a lattice row exactly at the top is open air, not a lid
+        between[:, -1] = points[:, -1] > inner_lower[-1]
+    inside = np.all(between, axis=-1)
     return points[~inside]
 
 
