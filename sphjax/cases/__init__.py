@@ -18,6 +18,11 @@ from sphjax.cases.fluid import (
     taylor_green,
     taylor_green_velocity,
 )
+from sphjax.cases.fsi import (
+    hydrostatic_fsi_plate,
+    midspan_deflection,
+    plate_deflection_reference,
+)
 from sphjax.cases.solid import (
     oscillating_plate,
     plate_mode_shape,
@@ -39,6 +44,7 @@ CASES = {
     "dam_break": dam_break,
     "oscillating_plate": oscillating_plate,
     "turek_hron_csm": turek_hron_csm,
+    "hydrostatic_fsi_plate": hydrostatic_fsi_plate,
 }
 
 
@@ -86,4 +92,7 @@ __all__ = [
     "plate_mode_shape",
     "plate_reference",
     "plate_sound_speed",
+    "hydrostatic_fsi_plate",
+    "midspan_deflection",
+    "plate_deflection_reference",
 ]
