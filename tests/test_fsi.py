@@ -166,8 +166,10 @@ def tiny_plate():
 
 def test_plate_gradients_match_finite_differences():
     """d(mean mid-span deflection over 300 coupled steps)/dE and /d(alpha) by reverse mode
-    equal float64 central differences (steps 1e-4 E and 1e-4 alpha) to 1e-5 relative, and
-    forward mode (jvp) equals reverse mode to 1e-8."""
+    equal float64 central differences to 1e-5 relative (steps 1e-4 E and 1e-3 alpha;
+    measured 1.3e-7 and 4.2e-6: the deflection depends on alpha only weakly, through the
+    fluid's small motion, so its difference quotient loses digits to round-off at smaller
+    steps, 6e-5 at 1e-4 alpha), and forward mode (jvp) equals reverse mode to 1e-8."""
     case = tiny_plate()
     E0, alpha0 = float(case.params.young_modulus), float(case.params.artificial_alpha)
 
@@ -179,10 +181,79 @@ def test_plate_gradients_match_finite_differences():
     f = jax.jit(deflection)
     grad = jax.jit(jax.grad(deflection, argnums=(0, 1)))(E0, alpha0)
     _, tangent_E = jax.jit(lambda E: jax.jvp(lambda e: deflection(e, alpha0), (E,), (1.0,)))(E0)
-    dE, da = 1e-4 * E0, 1e-4 * alpha0
+    dE, da = 1e-4 * E0, 1e-3 * alpha0
     fd_E = (f(E0 + dE, alpha0) - f(E0 - dE, alpha0)) / (2 * dE)
     fd_alpha = (f(E0, alpha0 + da) - f(E0, alpha0 - da)) / (2 * da)
     assert float(grad[0]) > 0  # stiffer plate, smaller (less negative) deflection
     assert abs(float(grad[0]) - float(fd_E)) <= 1e-5 * abs(float(fd_E))
     assert abs(float(grad[1]) - float(fd_alpha)) <= 1e-5 * abs(float(fd_alpha))
     assert abs(float(tangent_E) - float(grad[0])) <= 1e-8 * abs(float(grad[0]))
+
+
+def test_cases_run_from_the_command_line(tmp_path, capsys):
+    """``sphjax cases`` lists the FSI cases and ``sphjax run`` runs both (a few steps at
+    the coarsest resolution); the gate's free end starts moving downstream (+x)."""
+    from sphjax.cli import main
+
+    assert main(["cases"]) == 0
+    listed = [line.split()[0] for line in capsys.readouterr().out.splitlines()]
+    assert {"hydrostatic_fsi_plate", "elastic_gate_dam_break"} <= set(listed)
+    plate = ["run", "hydrostatic_fsi_plate", "--n", "2", "--t-end", "3e-5", "--quiet"]
+    plate += ["--case-arg", "length=0.3", "--case-arg", "depth=0.1"]
+    assert main([*plate, "--out", str(tmp_path / "plate.h5")]) == 0
+    gate = ["run", "elastic_gate_dam_break", "--n", "2", "--t-end", "2e-3", "--quiet"]
+    assert main([*gate, "--save-every", "60", "--out", str(tmp_path / "gate.h5")]) == 0
+    trajectory, _ = sphjax.read_trajectory(tmp_path / "gate.h5")
+    case = sphjax.cases.elastic_gate_dam_break(n=2)
+    tip = np.asarray(sphjax.cases.tip_displacement(trajectory, case))
+    assert tip[-1, 0] > 1e-5 and abs(tip[-1, 1]) < tip[-1, 0]
+
+
+def dry_equivalent(case):
+    """The plate of ``case`` alone, its weight raised to the total load
+    ``g (rho_f H + rho_s t)`` (gravity ``g_eff``), the same particles."""
+    kind = np.asarray(case.state.kind)
+    keep = kind >= Kind.SOLID
+
+    def take(a):
+        return a[keep] if getattr(a, "ndim", 0) >= 1 and a.shape[0] == len(kind) else a
+
+    state = jax.tree_util.tree_map(take, case.state)
+    info, p = case.info, case.params
+    rho_f, rho_s = float(p.reference_density), float(p.solid_density)
+    g_eff = info["gravity"] * (rho_f * info["depth"] + rho_s * info["thickness"])
+    g_eff /= rho_s * info["thickness"]
+    params = make_params(
+        2,
+        gravity=(0.0, -g_eff),
+        young_modulus=p.young_modulus,
+        poisson_ratio=p.poisson_ratio,
+        solid_density=rho_s,
+    )
+    model = case.model.replace(systems=(case.model.systems[2],))
+    shift = int((~keep).sum())
+    info = dict(info, midspan_indices=tuple(i - shift for i in info["midspan_indices"]))
+    return Case("dry", state, model, params, case.dt, case.t_end, info)
+
+
+@pytest.mark.slow
+def test_plate_carries_the_column():
+    """The coupled plate's static deflection equals that of the same plate alone under the
+    same total load (its weight raised by the column's, rho_f g H per unit length) within
+    3 %: the fluid's weight reaches the plate through the coupling.  The static value is
+    (max + min) / 2 of the mid-span deflection over the second half of 8 dry periods
+    (measured: FSI/dry = 0.990 at n = 2 and 0.983 at n = 3 on the 1 m plate under 0.5 m,
+    docs/validation_fsi.md).  Here a set-up not used for those numbers: a 0.4 m plate
+    0.05 m thick with 2 particles through it, a lighter plate (rho_s = 800) under 0.2 m of
+    water, so the column is 83 % of the load.  About 40 s."""
+    case = hydrostatic_fsi_plate(n=2, length=0.4, depth=0.2, solid_density=800.0)
+    n_steps = int(round(8 * case.info["dry_period"] / case.dt))
+
+    def static(c):
+        traj = sphjax.simulate(c, n_steps=n_steps, save_every=max(1, n_steps // 200))
+        w = np.asarray(midspan_deflection(traj, c))[len(traj) // 2 :]
+        return 0.5 * (w.max() + w.min())
+
+    coupled, dry = static(case), static(dry_equivalent(case))
+    assert coupled < 0 and dry < 0
+    assert abs(coupled / dry - 1.0) < 0.03

@@ -19,6 +19,7 @@ from sphjax.cases.fluid import (
     taylor_green_velocity,
 )
 from sphjax.cases.fsi import (
+    elastic_gate_dam_break,
     hydrostatic_fsi_plate,
     midspan_deflection,
     plate_deflection_reference,
@@ -45,6 +46,7 @@ CASES = {
     "oscillating_plate": oscillating_plate,
     "turek_hron_csm": turek_hron_csm,
     "hydrostatic_fsi_plate": hydrostatic_fsi_plate,
+    "elastic_gate_dam_break": elastic_gate_dam_break,
 }
 
 
@@ -93,6 +95,7 @@ __all__ = [
     "plate_reference",
     "plate_sound_speed",
     "hydrostatic_fsi_plate",
+    "elastic_gate_dam_break",
     "midspan_deflection",
     "plate_deflection_reference",
 ]
