@@ -5,9 +5,11 @@ cases.
   total linear momentum of fluid and solid to round-off, and the solid takes up momentum
   from the fluid (so the coupling acts);
 * the custom adjoint of the pair sums covers the coupling terms: gradients equal autodiff's
-  (``Model(pair_adjoint=False)``) through coupled steps;
-* the plate case: its neighbour lists, its reference deflection, and a check that the
-  fluid's pressure reaches the plate.
+  (``Model(pair_adjoint=False)``) through the right-hand side;
+* the plate case: its neighbour lists, its reference deflection, the fluid's pressure on
+  the plate; gradients through the coupled run against central differences (slow); the
+  coupled plate against the same plate alone under the same load (slow);
+* both cases run from the command line.
 """
 
 from __future__ import annotations
@@ -177,6 +179,7 @@ def tiny_plate():
     return hydrostatic_fsi_plate(n=2, length=0.3, depth=0.1)
 
 
+@pytest.mark.slow
 def test_plate_gradients_match_finite_differences():
     """d(mean mid-span deflection over 300 coupled steps)/dE and /d(alpha) by reverse mode
     equal float64 central differences to 1e-5 relative (steps 1e-4 E and 1e-3 alpha;
