@@ -214,6 +214,9 @@ def test_cases_run_from_the_command_line(tmp_path, capsys):
     assert main(["cases"]) == 0
     listed = [line.split()[0] for line in capsys.readouterr().out.splitlines()]
     assert {"hydrostatic_fsi_plate", "elastic_gate_dam_break"} <= set(listed)
+    assert "dam_break_elastic_obstacle" in listed
+    obstacle = sphjax.cases.get("dam_break_elastic_obstacle", n=2)
+    assert obstacle.info["n_clamped"] == 2 * 3 and len(obstacle.info["tip_indices"]) == 2
     plate = ["run", "hydrostatic_fsi_plate", "--n", "2", "--t-end", "3e-5", "--quiet"]
     plate += ["--case-arg", "length=0.3", "--case-arg", "depth=0.1"]
     assert main([*plate, "--out", str(tmp_path / "plate.h5")]) == 0

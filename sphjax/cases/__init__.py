@@ -19,6 +19,7 @@ from sphjax.cases.fluid import (
     taylor_green_velocity,
 )
 from sphjax.cases.fsi import (
+    dam_break_elastic_obstacle,
     elastic_gate_dam_break,
     hydrostatic_fsi_plate,
     midspan_deflection,
@@ -47,6 +48,7 @@ CASES = {
     "turek_hron_csm": turek_hron_csm,
     "hydrostatic_fsi_plate": hydrostatic_fsi_plate,
     "elastic_gate_dam_break": elastic_gate_dam_break,
+    "dam_break_elastic_obstacle": dam_break_elastic_obstacle,
 }
 
 
@@ -96,6 +98,7 @@ __all__ = [
     "plate_sound_speed",
     "hydrostatic_fsi_plate",
     "elastic_gate_dam_break",
+    "dam_break_elastic_obstacle",
     "midspan_deflection",
     "plate_deflection_reference",
 ]

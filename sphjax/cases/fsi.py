@@ -350,7 +350,111 @@ def elastic_gate_dam_break(
     return _finish("elastic_gate_dam_break", model, params, initial_state, t_end, info, cfl)
 
 
+def dam_break_elastic_obstacle(
+    n: int = 3,
+    column_width: float = 0.146,
+    plate_length: float = 0.08,
+    plate_thickness: float = 0.012,
+    young_modulus: float = 1.0e6,
+    poisson_ratio: float = 0.0,
+    solid_density: float = 2500.0,
+    fluid_density: float = 1000.0,
+    gravity: float = 9.81,
+    sound_speed_factor: float = 20.0,
+    artificial_alpha: float = 0.1,
+    kernel="wendland_c2",
+    h_factor: float = 1.5,
+    cfl: float = 0.5,
+    t_end: float = 1.0,
+) -> Case:
+    """A dam break hitting an elastic plate fixed to the floor (Zhan et al. 2019, section
+    6.5; TrixiParticles' ``dam_break_plate_2d``), plane strain.
+
+    Water ``L x 2L`` (``L = 0.146``) at the left of a tank ``4L`` long; an elastic plate
+    ``0.012`` thick and ``0.08`` high standing on the floor at ``x = 2L``, clamped below
+    the floor (clamped particles in place of the floor's wall particles under it).
+    ``E = 1 MPa``, ``nu = 0``, ``rho_s = 2500``.  The plate's top (``info["tip_indices"]``,
+    :func:`sphjax.cases.tip_displacement`) is the probe.  Not validated yet.
+
+    Args:
+      n: particles across the plate thickness (``dx = thickness / n``).
+    """
+    n = check_resolution("n", n, 2)
+    L = check_positive("column_width", column_width)
+    Lp = check_positive("plate_length", plate_length)
+    tp = check_positive("plate_thickness", plate_thickness)
+    E = check_positive("young_modulus", young_modulus)
+    rho_s = check_positive("solid_density", solid_density)
+    rho_f = check_positive("fluid_density", fluid_density)
+    g = check_positive("gravity", gravity)
+    dx = tp / n
+    nx, ny = int(round(L / dx)), int(round(2.0 * L / dx))
+    L = nx * dx
+    H = ny * dx
+    n_tank = int(round(4.0 * L / dx))
+    n_plate = int(round(Lp / dx))
+    i_plate = int(round(2.0 * L / dx))
+    kernel = as_kernel(kernel)
+    h = h_factor * dx
+    layers = wall_layers(kernel.support * h, dx)
+    tank_height = 1.25 * H
+    n_wall = int(math.ceil(tank_height / dx))
+    fluid = _rows(0.0, 0.0, nx, ny, dx)
+    floor = _rows(0.0, -layers * dx, n_tank, layers, dx)
+    under = (floor[:, 0] > i_plate * dx) & (floor[:, 0] < (i_plate + n) * dx)
+    walls = np.concatenate(
+        [
+            _rows(-layers * dx, -layers * dx, layers, n_wall + layers, dx),
+            floor[~under],
+            _rows(n_tank * dx, -layers * dx, layers, n_wall + layers, dx),
+        ]
+    )
+    plate = _rows(i_plate * dx, 0.0, n, n_plate, dx)
+    clamped = floor[under]
+    x, kind, initial_state = _fluid_solid_state(
+        fluid, walls, plate, clamped, dx, lambda x: H - x[:, 1]
+    )
+    c0 = sound_speed_factor * math.sqrt(g * H)
+    params = make_params(
+        2,
+        gravity=(0.0, -g),
+        reference_density=rho_f,
+        sound_speed=c0,
+        artificial_alpha=artificial_alpha,
+        young_modulus=E,
+        poisson_ratio=poisson_ratio,
+        solid_density=rho_s,
+    )
+    margin = (layers + 2) * dx
+    domain = Domain((-margin, -margin), (n_tank * dx + margin, 2.0 * tank_height), (False,) * 2)
+    fluid_kw = dict(
+        density="continuity", gamma=GAMMA, artificial_viscosity=True, density_diffusion="molteni"
+    )
+    model = _fsi_model(kernel, h, domain, fluid_kw, "no_slip", False, True)
+    solid = np.flatnonzero(kind == Kind.SOLID)
+    top = solid[x[solid, 1] > x[solid, 1].max() - 0.5 * dx]
+    centre = (i_plate + 0.5 * n) * dx
+    dist = np.abs(x[top, 0] - centre)
+    tips = top[dist < dist.min() + 1e-6 * dx]
+    info = dict(
+        n=n,
+        dx=dx,
+        column_width=L,
+        column_height=H,
+        tank_length=n_tank * dx,
+        plate_length=n_plate * dx,
+        plate_thickness=tp,
+        tip_index=int(tips[0]),
+        tip_indices=tuple(int(i) for i in tips),
+        n_fluid=len(fluid),
+        n_solid=len(plate),
+        n_clamped=len(clamped),
+    )
+    return _finish("dam_break_elastic_obstacle", model, params, initial_state, t_end, info, cfl)
+
+
 __all__ = [
+    "dam_break_elastic_obstacle",
     "elastic_gate_dam_break",
     "hydrostatic_fsi_plate",
     "midspan_deflection",
