@@ -62,6 +62,7 @@ _NAMES = {
     "StVenantKirchhoff": "sphjax.physics.solid.material",
     "PenaltyForce": "sphjax.physics.solid.penalty",
     "SolidSystem": "sphjax.physics.solid.system",
+    "SolidBoundary": "sphjax.physics.solid.boundary",
 }
 _MODULES = {"kernels": "sphjax.core.kernels"}
 
@@ -125,6 +126,7 @@ __all__ = [
     "SimulationError",
     "SolidParams",
     "SolidSystem",
+    "SolidBoundary",
     "stable_time_step",
     "State",
     "StVenantKirchhoff",

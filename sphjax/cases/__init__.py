@@ -18,6 +18,13 @@ from sphjax.cases.fluid import (
     taylor_green,
     taylor_green_velocity,
 )
+from sphjax.cases.fsi import (
+    dam_break_elastic_obstacle,
+    elastic_gate_dam_break,
+    hydrostatic_fsi_plate,
+    midspan_deflection,
+    plate_deflection_reference,
+)
 from sphjax.cases.fluid3d import (
     abc_flow_3d,
     abc_pressure,
@@ -57,6 +64,9 @@ CASES = {
     "cantilever_3d": cantilever_3d,
     "duct_poiseuille_3d": duct_poiseuille_3d,
     "dam_break_3d": dam_break_3d,
+    "hydrostatic_fsi_plate": hydrostatic_fsi_plate,
+    "elastic_gate_dam_break": elastic_gate_dam_break,
+    "dam_break_elastic_obstacle": dam_break_elastic_obstacle,
 }
 
 
@@ -118,4 +128,9 @@ __all__ = [
     "duct_poiseuille_3d",
     "duct_velocity",
     "dam_break_3d",
+    "hydrostatic_fsi_plate",
+    "elastic_gate_dam_break",
+    "dam_break_elastic_obstacle",
+    "midspan_deflection",
+    "plate_deflection_reference",
 ]

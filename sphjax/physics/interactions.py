@@ -11,7 +11,11 @@ the formulation through :func:`sphjax.physics.pairs.pair_sum`.
   transport-velocity stress and background-pressure shift (Adami, Hu & Adams 2013);
 * fluid-wall: the same pressure and viscous terms against the boundary particles' pressure,
   density and (no-slip) velocity from the wall's update stage (Adami et al. 2012);
-* solid-solid: the TLSPH momentum equation (eq. 14) with the optional penalty force.
+* solid-solid: the TLSPH momentum equation (eq. 14) with the optional penalty force;
+* fluid-solid and solid-fluid: the solid's particles as moving boundary particles for the
+  fluid (the fluid-wall terms against the pressure, density and velocity of
+  :func:`sphjax.physics.fsi.update_solid_boundary`), and every such pair force equal and
+  opposite on the solid (:mod:`sphjax.physics.fsi`).
 
 Each function returns a dict with ``"a"`` (``[n_A, d]``) and, for fluids, ``"shift"``.
 """
@@ -23,6 +27,7 @@ import functools
 import jax.numpy as jnp
 
 from sphjax.core.space import displacement_fn
+from sphjax.physics import fsi
 from sphjax.physics.boundary.system import WallSystem
 from sphjax.physics.fluid.momentum import pressure_acceleration, transport_stress_acceleration
 from sphjax.physics.fluid.system import FluidSystem
@@ -157,11 +162,49 @@ def solid_solid(system: SolidSystem, solid, _other, _solid, pairs, ctx):
     return ctx.pair_sum(summand, rows, None, pairs, shared, weight="V", parity=-1)
 
 
+def _fluid_on_boundary(system: FluidSystem, h, no_slip):
+    """The fluid's momentum summand against boundary particles (eq. 10 and viscosities)."""
+    return functools.partial(
+        _hydrodynamic_summand,
+        h=h,
+        artificial=system.artificial_viscosity,
+        morris=system.physical_viscosity,
+        stress=False,
+        shift=system.transport_velocity is not None,
+        viscous=no_slip,
+    )
+
+
+def fluid_solid(system: FluidSystem, fluid, solid_system: SolidSystem, solid, pairs, ctx):
+    """Fluid-solid momentum: the solid's particles as moving boundary particles (eq. 10
+    against their extrapolated pressure and density, viscous terms with their velocity
+    for a no-slip :class:`~sphjax.SolidBoundary`)."""
+    h = ctx.geometry.smoothing_length
+    summand = _fluid_on_boundary(system, h, solid_system.boundary.no_slip)
+    cols = fsi.solid_as_boundary_columns(solid)
+    rows = _fluid_rows(fluid, False)
+    return ctx.pair_sum(summand, rows, cols, pairs, _fluid_shared(ctx), weight="m")
+
+
+def solid_fluid(solid_system: SolidSystem, solid, system: FluidSystem, fluid, pairs, ctx):
+    """Solid-fluid: each fluid-solid pair force of :func:`fluid_solid`, equal and opposite
+    on the solid particle (:func:`sphjax.physics.fsi.reaction_summand`)."""
+    h = ctx.geometry.smoothing_length
+    fluid_term = _fluid_on_boundary(system, h, solid_system.boundary.no_slip)
+    fluid_term = functools.partial(fluid_term, shift=False)
+    summand = functools.partial(fsi.reaction_summand, fluid_term=fluid_term)
+    rows = {**fsi.solid_as_boundary_columns(solid), "m_solid": solid["m"]}
+    cols = _fluid_rows(fluid, False)
+    return ctx.pair_sum(summand, rows, cols, pairs, _fluid_shared(ctx), weight="m")
+
+
 #: (row system type, neighbour system type) -> interaction function
 INTERACTIONS = {
     (FluidSystem, FluidSystem): fluid_fluid,
     (FluidSystem, WallSystem): fluid_wall,
     (SolidSystem, SolidSystem): solid_solid,
+    (FluidSystem, SolidSystem): fluid_solid,
+    (SolidSystem, FluidSystem): solid_fluid,
 }
 
 #: pairs of system types whose neighbour lists the update stage needs besides those of

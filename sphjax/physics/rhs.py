@@ -38,6 +38,7 @@ from sphjax.core.neighbors import (
 )
 from sphjax.core.pytree import pytree_dataclass
 from sphjax.core.state import Kind, State
+from sphjax.physics import fsi
 from sphjax.physics import pairs as pairs_module
 from sphjax.physics.boundary.system import WallSystem, update_wall
 from sphjax.physics.fluid.system import FluidSystem, update_fluid
@@ -133,7 +134,19 @@ def neighbor_search(model) -> NeighborSearch:
 
 
 def _current(model):
-    return [i for i, s in enumerate(model.systems) if s.current_configuration]
+    """Systems in the current-configuration search: those that interact in the current
+    configuration, and those with a pair against one of them (a solid next to a fluid;
+    its own pairs stay in the reference configuration)."""
+    own = {i for i, s in enumerate(model.systems) if s.current_configuration}
+    cross = {
+        k for i, j in neighbor_pairs(model) if i != j and (i in own or j in own) for k in (i, j)
+    }
+    return sorted(own | cross)
+
+
+def _searched_pair(model, i, j) -> bool:
+    """Whether the list of systems ``i`` against ``j`` comes from the current search."""
+    return i != j or model.systems[i].current_configuration
 
 
 def _local(block, union):
@@ -161,7 +174,7 @@ def build_neighbors(
             state.position[union[0] : union[1]], extra_capacity
         )
         for i, j in wanted:
-            if i in current and j in current and len(current) > 1:
+            if i in current and j in current and len(current) > 1 and _searched_pair(model, i, j):
                 width = measured_capacity(
                     search.idx,
                     _local(blocks[i], union),
@@ -239,7 +252,7 @@ def _split(neighbors: Neighbors, model) -> dict:
 
 
 def _current_keys(neighbors: Neighbors, model):
-    return {k for k in neighbors.pairs if model.systems[k[0]].current_configuration}
+    return {k for k in neighbors.pairs if _searched_pair(model, *k)}
 
 
 def _split_overflow(neighbors: Neighbors, model):
@@ -373,6 +386,10 @@ def update_stage(state: State, neighbors: Neighbors, model, params, density_step
                 (views[j], neighbors.pairs[(i, j)])
                 for j, other in enumerate(model.systems)
                 if isinstance(other, WallSystem) and (i, j) in neighbors.pairs
+            ] + [
+                (fsi.fluid_view_of_solid(views[j], params.fluid), neighbors.pairs[(i, j)])
+                for j, other in enumerate(model.systems)
+                if isinstance(other, SolidSystem) and (i, j) in neighbors.pairs and _size(blocks[j])
             ]
             fluid_ctx = dataclasses.replace(ctx, fluid_pairs=neighbors.pairs[(i, i)])
             views[i] = update_fluid(system, views[i], boundaries, fluid_ctx, density_step)
@@ -385,6 +402,11 @@ def update_stage(state: State, neighbors: Neighbors, model, params, density_step
     for i, system in enumerate(model.systems):
         if isinstance(system, SolidSystem) and _size(blocks[i]):
             views[i] = update_solid(system, views[i], neighbors.pairs[(i, i)], ctx)
+            for j, fluid_system in enumerate(model.systems):
+                if (i, j) in neighbors.pairs and isinstance(fluid_system, FluidSystem):
+                    views[i] = fsi.update_solid_boundary(
+                        system, views[i], fluid_system, views[j], neighbors.pairs[(i, j)], ctx
+                    )
     return [_named(view) for view in views]
 
 
@@ -442,6 +464,7 @@ def _view(state: State, block, system, density_step):
     if isinstance(system, SolidSystem):
         free = state.kind[s] == Kind.SOLID
         view.update(X=state.reference_position[s], V=state.volume[s], free=free)
+        view["a"] = state.acceleration[s]
     return view
 
 

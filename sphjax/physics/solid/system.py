@@ -34,6 +34,7 @@ import jax.numpy as jnp
 
 from sphjax.core.space import displacement_fn
 from sphjax.core.state import Kind
+from sphjax.physics.solid.boundary import SolidBoundary
 from sphjax.physics.solid.correction import (
     corrected_kernel_gradient,
     correction_matrix,
@@ -54,11 +55,14 @@ class SolidSystem:
       penalty: ``None`` or :class:`~sphjax.PenaltyForce` (hourglass control, eq. 14).
       clamped_motion: ``None`` (clamped particles stay put) or a hashable function
         ``(t, X) -> x`` giving the prescribed positions of clamped particles.
+      boundary: :class:`~sphjax.SolidBoundary`, how a fluid in the same model sees the
+        solid (fluid-structure interaction, :mod:`sphjax.physics.fsi`).
     """
 
     material: object = StVenantKirchhoff()
     penalty: object = None
     clamped_motion: Callable[[Any, Any], Any] | None = None
+    boundary: SolidBoundary = SolidBoundary()
 
     kinds = (Kind.SOLID, Kind.CLAMPED)
     current_configuration = False
@@ -71,6 +75,11 @@ class SolidSystem:
         if self.penalty is not None and not isinstance(self.penalty, PenaltyForce):
             raise ValueError(
                 f"SolidSystem.penalty must be None or PenaltyForce(), got {self.penalty!r}"
+            )
+
+        if not isinstance(self.boundary, SolidBoundary):
+            raise ValueError(
+                f"SolidSystem.boundary must be SolidBoundary(...), got {self.boundary!r}"
             )
 
     def replace(self, **changes) -> SolidSystem:

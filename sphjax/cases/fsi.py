@@ -1,0 +1,462 @@
+"""Fluid-structure interaction cases: elastic (TLSPH) solids in weakly compressible fluids.
+
+* :func:`hydrostatic_fsi_plate` — a water column resting on an elastic plate clamped at
+  both ends (Fourey et al. 2017; O'Connor & Rogers 2021): its static mid-span deflection
+  against Euler-Bernoulli theory (:func:`plate_deflection_reference`).
+* :func:`elastic_gate_dam_break` — a water column held by a rubber gate clamped at its top
+  (Antoci, Gallati & Sibilla 2007).
+
+Each returns a :class:`sphjax.Case` whose model is ``(FluidSystem, WallSystem,
+SolidSystem)``: the solid's particles are moving boundary particles for the fluid and the
+fluid's pair forces act back on them (:mod:`sphjax.physics.fsi`).
+"""
+
+from __future__ import annotations
+
+import math
+
+import jax.numpy as jnp
+import numpy as np
+
+from sphjax.cases._geometry import check_positive, check_resolution, lattice, wall_layers
+from sphjax.cases._systems import fluid_system, wall_system
+from sphjax.core.case import Case
+from sphjax.core.kernels import as_kernel
+from sphjax.core.model import Domain, Model
+from sphjax.core.params import make_params
+from sphjax.core.state import Kind, make_state
+from sphjax.integration.timestep import stable_time_step
+from sphjax.physics.fluid.eos import tait_density
+from sphjax.physics.solid.boundary import SolidBoundary
+from sphjax.physics.solid.penalty import PenaltyForce
+from sphjax.physics.solid.system import SolidSystem
+
+GAMMA = 7.0
+
+
+def plate_deflection_reference(
+    length, thickness, depth, young_modulus, poisson_ratio, solid_density, fluid_density, gravity
+):
+    """Euler-Bernoulli mid-span deflection of a plate clamped at both ends under its own
+    weight and a water column: ``w = -q L^4 / (384 D)``, ``D = E t^3 / (12 (1 - nu^2))``
+    (plane strain), ``q = g (rho_f H + rho_s t)`` (Fourey et al. 2017).  Works with
+    jax.numpy arguments (differentiable in ``young_modulus``)."""
+    D = young_modulus * thickness**3 / (12.0 * (1.0 - poisson_ratio**2))
+    q = gravity * (fluid_density * depth + solid_density * thickness)
+    return -q * length**4 / (384.0 * D)
+
+
+def midspan_deflection(trajectory, case: Case):
+    """Vertical displacement ``y - Y`` of the plate at mid-span, ``[T]`` (or a scalar for
+    one State): the mean over the particles of the column(s) nearest ``x = L / 2``
+    (``case.info["midspan_indices"]``), across the whole thickness; jax.numpy."""
+    states = getattr(trajectory, "states", trajectory)
+    position = jnp.asarray(getattr(states, "position", states))
+    idx = jnp.asarray(case.info["midspan_indices"])
+    anchor = case.state.reference_position[idx, 1]
+    return jnp.mean(position[..., idx, 1] - anchor, axis=-1)
+
+
+def _rows(x0, y0, nx, ny, dx):
+    """Lattice points ``(x0 + (i + 1/2) dx, y0 + (j + 1/2) dx)``, ``0 <= i < nx, 0 <= j < ny``."""
+    return lattice([x0, y0], [x0 + nx * dx, y0 + ny * dx], dx)
+
+
+def _fsi_model(kernel, h, domain, fluid_kw, wall_slip, penalty, no_slip_solid):
+    return Model(
+        dim=2,
+        smoothing_length=h,
+        kernel=kernel,
+        domain=domain,
+        systems=(
+            fluid_system(**fluid_kw),
+            wall_system(wall_slip),
+            SolidSystem(
+                penalty=PenaltyForce() if penalty else None,
+                boundary=SolidBoundary(no_slip=no_slip_solid),
+            ),
+        ),
+    )
+
+
+def _column_indices(x, kind, x_probe, y_probe=None, dx=1.0):
+    """Free solid particles of the lattice column nearest ``x_probe`` (both columns when
+    ``x_probe`` falls between two), or of that column those nearest ``y_probe``."""
+    solid = np.flatnonzero(kind == Kind.SOLID)
+    dist = np.abs(x[solid, 0] - x_probe)
+    column = solid[dist < dist.min() + 1e-6 * dx]
+    if y_probe is None:
+        return column
+    dist = np.abs(x[column, 1] - y_probe)
+    return column[dist < dist.min() + 1e-6 * dx]
+
+
+def _fluid_solid_state(fluid, walls, solid, clamped, dx, depth_of):
+    """``initial_state(params)``: hydrostatic fluid density ``rho(rho0 g (H - y))``
+    (eq. 12 inverted), masses ``rho dx^2``, the solid at its reference density."""
+    x = np.concatenate([fluid, walls, solid, clamped])
+    kind = np.concatenate(
+        [
+            np.full(len(fluid), Kind.FLUID),
+            np.full(len(walls), Kind.WALL),
+            np.full(len(solid), Kind.SOLID),
+            np.full(len(clamped), Kind.CLAMPED),
+        ]
+    ).astype(np.int32)
+    is_fluid = jnp.asarray(kind == Kind.FLUID)
+    is_solid = jnp.asarray(kind >= Kind.SOLID)
+    depth = jnp.asarray(np.where(kind == Kind.FLUID, depth_of(x), 0.0))
+
+    def initial_state(p):
+        rho0 = p.reference_density
+        pressure = rho0 * (-p.gravity[-1]) * depth
+        rho_f = tait_density(pressure, rho0, p.sound_speed, GAMMA)
+        rho = jnp.where(is_solid, p.solid_density, jnp.where(is_fluid, rho_f, rho0))
+        mass = jnp.where(is_solid, p.solid_density, rho0) * dx**2
+        return make_state(x, 0.0, rho, mass, kind, volume=dx**2)
+
+    return x, kind, initial_state
+
+
+def _finish(name, model, params, initial_state, t_end, info, cfl):
+    state = initial_state(params)
+    dt = stable_time_step(state, model, params, solid_cfl=cfl)
+    return Case(
+        name=name,
+        state=state,
+        model=model,
+        params=params,
+        dt=dt,
+        t_end=t_end,
+        info=info,
+        initial_state=initial_state,
+    )
+
+
+def hydrostatic_fsi_plate(
+    n: int = 4,
+    length: float = 1.0,
+    thickness: float = 0.05,
+    depth: float = 2.0,
+    young_modulus: float = 67.5e9,
+    poisson_ratio: float = 0.3,
+    solid_density: float = 2700.0,
+    fluid_density: float = 1000.0,
+    gravity: float = 9.81,
+    sound_speed_factor: float = 10.0,
+    artificial_alpha: float = 0.1,
+    kernel="wendland_c2",
+    h_factor: float = 1.2,
+    cfl: float = 0.5,
+    t_end: float | None = None,
+) -> Case:
+    """A water column of depth ``H`` resting on an elastic plate clamped at both ends
+    (Fourey et al. 2017; O'Connor & Rogers 2021), plane strain.
+
+    The plate ``[0, L] x [-t, 0]`` (``n`` particles through its thickness, ``dx = t / n``)
+    continues beyond both ends as clamped particles (two kernel supports); the fluid
+    ``[0, L] x [0, H]`` sits on it between two no-slip side walls, from the hydrostatic
+    density.  Fluid: continuity density with delta-SPH, Tait (``gamma = 7``),
+    ``c0 = sound_speed_factor sqrt(g H)``, artificial viscosity ``alpha``.  The plate
+    starts flat and unloaded, oscillates about its static deflection, and its mid-span
+    deflection (:func:`midspan_deflection`), averaged over the second half of the run, is
+    compared with ``w = -q L^4 / (384 D)`` (:func:`plate_deflection_reference`;
+    ``info["reference_deflection"]``), -7.05e-5 m with the defaults.
+
+    Args:
+      n: particles through the plate thickness.
+      kernel, h_factor: kernel name and ``h = h_factor dx`` for fluid and solid.
+      cfl: solid Courant number of the time step (the solid's sound speed sets it).
+      t_end: default ``20`` periods of the plate's first dry bending mode.
+    """
+    n = check_resolution("n", n, 2)
+    L = check_positive("length", length)
+    t = check_positive("thickness", thickness)
+    H = check_positive("depth", depth)
+    E = check_positive("young_modulus", young_modulus)
+    rho_s = check_positive("solid_density", solid_density)
+    rho_f = check_positive("fluid_density", fluid_density)
+    g = check_positive("gravity", gravity)
+    dx = t / n
+    nx = int(round(L / dx))
+    L = nx * dx
+    ny = int(round(H / dx))
+    H = ny * dx
+    kernel = as_kernel(kernel)
+    h = h_factor * dx
+    cutoff = kernel.support * h
+    layers = wall_layers(cutoff, dx)
+    n_clamp = 2 * layers
+    tank_height = H + max(0.1 * H, 2 * cutoff)
+    n_wall = int(math.ceil(tank_height / dx))
+    fluid = _rows(0.0, 0.0, nx, ny, dx)
+    walls = np.concatenate(
+        [_rows(-layers * dx, 0.0, layers, n_wall, dx), _rows(L, 0.0, layers, n_wall, dx)]
+    )
+    plate = _rows(0.0, -t, nx, n, dx)
+    clamped = np.concatenate(
+        [_rows(-n_clamp * dx, -t, n_clamp, n, dx), _rows(L, -t, n_clamp, n, dx)]
+    )
+    x, kind, initial_state = _fluid_solid_state(
+        fluid, walls, plate, clamped, dx, lambda x: H - x[:, 1]
+    )
+    c0 = sound_speed_factor * math.sqrt(g * H)
+    params = make_params(
+        2,
+        gravity=(0.0, -g),
+        reference_density=rho_f,
+        sound_speed=c0,
+        artificial_alpha=artificial_alpha,
+        young_modulus=E,
+        poisson_ratio=poisson_ratio,
+        solid_density=rho_s,
+    )
+    margin = (n_clamp + 2) * dx
+    domain = Domain((-margin, -t - margin), (L + margin, tank_height + H + margin), (False,) * 2)
+    fluid_kw = dict(
+        density="continuity", gamma=GAMMA, artificial_viscosity=True, density_diffusion="molteni"
+    )
+    model = _fsi_model(kernel, h, domain, fluid_kw, "no_slip", False, True)
+    D = E * t**3 / (12.0 * (1.0 - poisson_ratio**2))
+    omega = 22.373 / L**2 * math.sqrt(D / (rho_s * t))  # clamped-clamped first mode (dry)
+    if t_end is None:
+        t_end = 20 * 2.0 * math.pi / omega
+    reference = plate_deflection_reference(L, t, H, E, poisson_ratio, rho_s, rho_f, g)
+    info = dict(
+        n=n,
+        dx=dx,
+        length=L,
+        thickness=t,
+        depth=H,
+        gravity=g,
+        reference_deflection=float(reference),
+        dry_period=2.0 * math.pi / omega,
+        midspan_indices=tuple(int(i) for i in _column_indices(x, kind, 0.5 * L, dx=dx)),
+        n_fluid=len(fluid),
+        n_solid=len(plate),
+        n_clamped=len(clamped),
+    )
+    return _finish("hydrostatic_fsi_plate", model, params, initial_state, t_end, info, cfl)
+
+
+def elastic_gate_dam_break(
+    n: int = 2,
+    column_width: float = 0.1,
+    column_height: float = 0.14,
+    gate_length: float = 0.079,
+    gate_thickness: float = 0.005,
+    young_modulus: float = 12.0e6,
+    poisson_ratio: float = 0.4,
+    solid_density: float = 1100.0,
+    fluid_density: float = 1000.0,
+    gravity: float = 9.81,
+    sound_speed_factor: float = 20.0,
+    artificial_alpha: float = 0.1,
+    outflow_length: float = 0.2,
+    kernel="wendland_c2",
+    h_factor: float = 1.5,
+    cfl: float = 0.5,
+    t_end: float = 0.4,
+) -> Case:
+    """Dam break through an elastic gate (Antoci, Gallati & Sibilla 2007), plane strain.
+
+    Water ``[0, 0.1] x [0, 0.14]`` held on the right by a rubber gate ``0.005`` thick and
+    ``0.079`` long, clamped at its top (clamped particles over two kernel supports above
+    ``y = 0.079``, a rigid wall above them), its free end at the floor; the floor runs on
+    ``outflow_length`` to the right of the gate, where the water escapes as the gate
+    bends.  Gate: ``E = 12 MPa``, ``nu = 0.4``, ``rho_s = 1100`` (the values vary across
+    the literature: E 7.8-12 MPa, nu 0.4-0.47).  Fluid: continuity density with
+    delta-SPH, Tait, ``c0 = sound_speed_factor sqrt(g H)``.  The free end's displacement
+    (``info["tip_indices"]``, :func:`sphjax.cases.tip_displacement`) peaks at about
+    0.04 m horizontally near t = 0.15-0.2 s in the experiment.
+
+    Args:
+      n: particles across the gate thickness (``dx = thickness / n``).
+    """
+    n = check_resolution("n", n, 2)
+    W = check_positive("column_width", column_width)
+    Hc = check_positive("column_height", column_height)
+    Lg = check_positive("gate_length", gate_length)
+    tg = check_positive("gate_thickness", gate_thickness)
+    E = check_positive("young_modulus", young_modulus)
+    rho_s = check_positive("solid_density", solid_density)
+    rho_f = check_positive("fluid_density", fluid_density)
+    g = check_positive("gravity", gravity)
+    out = check_positive("outflow_length", outflow_length)
+    dx = tg / n
+    nx, ny = int(round(W / dx)), int(round(Hc / dx))
+    W, Hc = nx * dx, ny * dx
+    n_gate = int(round(Lg / dx))
+    Lg = n_gate * dx
+    kernel = as_kernel(kernel)
+    h = h_factor * dx
+    layers = wall_layers(kernel.support * h, dx)
+    n_clamp = 2 * layers
+    tank_height = Hc + 2 * layers * dx
+    n_out = int(round(out / dx))
+    fluid = _rows(0.0, 0.0, nx, ny, dx)
+    gate = _rows(W, 0.0, n, n_gate, dx)
+    clamped = _rows(W, Lg, n, n_clamp, dx)
+    top = Lg + n_clamp * dx
+    n_top = int(math.ceil((tank_height - top) / dx))
+    walls = np.concatenate(
+        [
+            _rows(-layers * dx, -layers * dx, layers, ny + 3 * layers, dx),  # left
+            _rows(0.0, -layers * dx, nx + n + n_out, layers, dx),  # floor
+            _rows(W, top, max(n, layers), max(n_top, 1), dx),  # above the clamp
+        ]
+    )
+    x, kind, initial_state = _fluid_solid_state(
+        fluid, walls, gate, clamped, dx, lambda x: Hc - x[:, 1]
+    )
+    c0 = sound_speed_factor * math.sqrt(g * Hc)
+    params = make_params(
+        2,
+        gravity=(0.0, -g),
+        reference_density=rho_f,
+        sound_speed=c0,
+        artificial_alpha=artificial_alpha,
+        young_modulus=E,
+        poisson_ratio=poisson_ratio,
+        solid_density=rho_s,
+    )
+    margin = (layers + 2) * dx
+    domain = Domain(
+        (-margin, -margin), (W + (n + n_out) * dx + margin, tank_height + margin), (False,) * 2
+    )
+    fluid_kw = dict(
+        density="continuity", gamma=GAMMA, artificial_viscosity=True, density_diffusion="molteni"
+    )
+    model = _fsi_model(kernel, h, domain, fluid_kw, "no_slip", False, True)
+    gate_mask = kind == Kind.SOLID
+    bottom = np.flatnonzero(gate_mask & (x[:, 1] < dx))
+    centre = W + 0.5 * tg
+    dist = np.abs(x[bottom, 0] - centre)
+    tips = bottom[dist < dist.min() + 1e-6 * dx]
+    info = dict(
+        n=n,
+        dx=dx,
+        column_width=W,
+        column_height=Hc,
+        gate_length=Lg,
+        gate_thickness=tg,
+        tip_index=int(tips[0]),
+        tip_indices=tuple(int(i) for i in tips),
+        n_fluid=len(fluid),
+        n_solid=len(gate),
+        n_clamped=len(clamped),
+        experiment_peak_ux=0.04,
+    )
+    return _finish("elastic_gate_dam_break", model, params, initial_state, t_end, info, cfl)
+
+
+def dam_break_elastic_obstacle(
+    n: int = 3,
+    column_width: float = 0.146,
+    plate_length: float = 0.08,
+    plate_thickness: float = 0.012,
+    young_modulus: float = 1.0e6,
+    poisson_ratio: float = 0.0,
+    solid_density: float = 2500.0,
+    fluid_density: float = 1000.0,
+    gravity: float = 9.81,
+    sound_speed_factor: float = 20.0,
+    artificial_alpha: float = 0.1,
+    kernel="wendland_c2",
+    h_factor: float = 1.5,
+    cfl: float = 0.5,
+    t_end: float = 1.0,
+) -> Case:
+    """A dam break hitting an elastic plate fixed to the floor (Zhan et al. 2019, section
+    6.5; TrixiParticles' ``dam_break_plate_2d``), plane strain.
+
+    Water ``L x 2L`` (``L = 0.146``) at the left of a tank ``4L`` long; an elastic plate
+    ``0.012`` thick and ``0.08`` high standing on the floor at ``x = 2L``, clamped below
+    the floor (clamped particles in place of the floor's wall particles under it).
+    ``E = 1 MPa``, ``nu = 0``, ``rho_s = 2500``.  The plate's top (``info["tip_indices"]``,
+    :func:`sphjax.cases.tip_displacement`) is the probe.  Not validated yet.
+
+    Args:
+      n: particles across the plate thickness (``dx = thickness / n``).
+    """
+    n = check_resolution("n", n, 2)
+    L = check_positive("column_width", column_width)
+    Lp = check_positive("plate_length", plate_length)
+    tp = check_positive("plate_thickness", plate_thickness)
+    E = check_positive("young_modulus", young_modulus)
+    rho_s = check_positive("solid_density", solid_density)
+    rho_f = check_positive("fluid_density", fluid_density)
+    g = check_positive("gravity", gravity)
+    dx = tp / n
+    nx, ny = int(round(L / dx)), int(round(2.0 * L / dx))
+    L = nx * dx
+    H = ny * dx
+    n_tank = int(round(4.0 * L / dx))
+    n_plate = int(round(Lp / dx))
+    i_plate = int(round(2.0 * L / dx))
+    kernel = as_kernel(kernel)
+    h = h_factor * dx
+    layers = wall_layers(kernel.support * h, dx)
+    tank_height = 1.25 * H
+    n_wall = int(math.ceil(tank_height / dx))
+    fluid = _rows(0.0, 0.0, nx, ny, dx)
+    floor = _rows(0.0, -layers * dx, n_tank, layers, dx)
+    under = (floor[:, 0] > i_plate * dx) & (floor[:, 0] < (i_plate + n) * dx)
+    walls = np.concatenate(
+        [
+            _rows(-layers * dx, -layers * dx, layers, n_wall + layers, dx),
+            floor[~under],
+            _rows(n_tank * dx, -layers * dx, layers, n_wall + layers, dx),
+        ]
+    )
+    plate = _rows(i_plate * dx, 0.0, n, n_plate, dx)
+    clamped = floor[under]
+    x, kind, initial_state = _fluid_solid_state(
+        fluid, walls, plate, clamped, dx, lambda x: H - x[:, 1]
+    )
+    c0 = sound_speed_factor * math.sqrt(g * H)
+    params = make_params(
+        2,
+        gravity=(0.0, -g),
+        reference_density=rho_f,
+        sound_speed=c0,
+        artificial_alpha=artificial_alpha,
+        young_modulus=E,
+        poisson_ratio=poisson_ratio,
+        solid_density=rho_s,
+    )
+    margin = (layers + 2) * dx
+    domain = Domain((-margin, -margin), (n_tank * dx + margin, 2.0 * tank_height), (False,) * 2)
+    fluid_kw = dict(
+        density="continuity", gamma=GAMMA, artificial_viscosity=True, density_diffusion="molteni"
+    )
+    model = _fsi_model(kernel, h, domain, fluid_kw, "no_slip", False, True)
+    solid = np.flatnonzero(kind == Kind.SOLID)
+    top = solid[x[solid, 1] > x[solid, 1].max() - 0.5 * dx]
+    centre = (i_plate + 0.5 * n) * dx
+    dist = np.abs(x[top, 0] - centre)
+    tips = top[dist < dist.min() + 1e-6 * dx]
+    info = dict(
+        n=n,
+        dx=dx,
+        column_width=L,
+        column_height=H,
+        tank_length=n_tank * dx,
+        plate_length=n_plate * dx,
+        plate_thickness=tp,
+        tip_index=int(tips[0]),
+        tip_indices=tuple(int(i) for i in tips),
+        n_fluid=len(fluid),
+        n_solid=len(plate),
+        n_clamped=len(clamped),
+    )
+    return _finish("dam_break_elastic_obstacle", model, params, initial_state, t_end, info, cfl)
+
+
+__all__ = [
+    "dam_break_elastic_obstacle",
+    "elastic_gate_dam_break",
+    "hydrostatic_fsi_plate",
+    "midspan_deflection",
+    "plate_deflection_reference",
+]
