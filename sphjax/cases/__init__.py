@@ -18,13 +18,6 @@ from sphjax.cases.fluid import (
     taylor_green,
     taylor_green_velocity,
 )
-from sphjax.cases.fsi import (
-    dam_break_elastic_obstacle,
-    elastic_gate_dam_break,
-    hydrostatic_fsi_plate,
-    midspan_deflection,
-    plate_deflection_reference,
-)
 from sphjax.cases.fluid3d import (
     abc_flow_3d,
     abc_pressure,
@@ -33,6 +26,13 @@ from sphjax.cases.fluid3d import (
     duct_poiseuille_3d,
     duct_velocity,
     hydrostatic_tank_3d,
+)
+from sphjax.cases.fsi import (
+    dam_break_elastic_obstacle,
+    elastic_gate_dam_break,
+    hydrostatic_fsi_plate,
+    midspan_deflection,
+    plate_deflection_reference,
 )
 from sphjax.cases.setup_file import SetupError, from_toml
 from sphjax.cases.solid import (
