@@ -151,7 +151,6 @@ def abc_flow_3d(
         reference_density=rho0,
         sound_speed=c0,
         kinematic_viscosity=nu,
-        transport_pressure=rho0 * c0**2,
     )
 
     def initial_state(p):
