@@ -183,7 +183,7 @@ def fluid_solid(system: FluidSystem, fluid, solid_system: SolidSystem, solid, pa
     summand = _fluid_on_boundary(system, h, solid_system.boundary.no_slip)
     cols = fsi.solid_as_boundary_columns(solid)
     rows = _fluid_rows(fluid, False)
-    return ctx.pair_sum(summand, rows, cols, pairs, _fluid_shared(ctx), weight="m")
+    return ctx.pair_sum(summand, rows, cols, pairs, _fluid_shared(system, ctx), weight="m")
 
 
 def solid_fluid(solid_system: SolidSystem, solid, system: FluidSystem, fluid, pairs, ctx):
@@ -195,7 +195,7 @@ def solid_fluid(solid_system: SolidSystem, solid, system: FluidSystem, fluid, pa
     summand = functools.partial(fsi.reaction_summand, fluid_term=fluid_term)
     rows = {**fsi.solid_as_boundary_columns(solid), "m_solid": solid["m"]}
     cols = _fluid_rows(fluid, False)
-    return ctx.pair_sum(summand, rows, cols, pairs, _fluid_shared(ctx), weight="m")
+    return ctx.pair_sum(summand, rows, cols, pairs, _fluid_shared(system, ctx), weight="m")
 
 
 #: (row system type, neighbour system type) -> interaction function
