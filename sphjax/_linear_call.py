@@ -7,13 +7,14 @@ gives both: its JVP is ``jax.jvp(f)`` wrapped in the public
 autodiff and reverse mode (``grad``, ``vjp``) calls ``adjoint``.
 
 ``jax.vmap`` of such a function in forward mode (``jacfwd`` is a vmapped ``jvp``) needs a
-batching rule for ``linear_call``, which JAX up to 0.10 does not have.  The one private
-hook sphjax uses is isolated here: on first use, and only for the JAX versions it was
-tested with (:data:`TESTED_JAX`), a batching rule is *added* for that primitive if JAX has
-none (no existing rule is replaced; programs that do not call ``linear_call`` are not
-affected).  For any other JAX version, or if the hook cannot be installed,
-``custom_adjoint`` returns ``f`` unchanged: plain autodiff, slower in reverse mode, same
-results.
+batching rule for ``linear_call``, which JAX up to 0.10 does not have.  The one hook into
+JAX's internals is isolated here, through public modules only (the primitive is read from
+a traced program, the rule goes into ``jax.interpreters.batching``): on first use, and only
+for the JAX versions it was tested with (:data:`TESTED_JAX`), a batching rule is *added*
+for that primitive if JAX has none (no existing rule is replaced; programs that do not
+call ``linear_call`` are not affected).  For any other JAX version, or if the hook cannot
+be installed, ``custom_adjoint`` returns ``f`` unchanged: plain autodiff, slower in
+reverse mode, same results.
 
 First derivatives only: ``linear_call`` has no derivative with respect to its residuals;
 asking for a second derivative raises a ``NotImplementedError`` that names
@@ -42,16 +43,29 @@ def _jax_version() -> tuple[int, int]:
     return major, minor
 
 
+def _linear_call_primitive():
+    """The primitive behind ``linear_call``, read from a traced program (public API only);
+    ``None`` if it cannot be found."""
+    try:
+        jaxpr = jax.make_jaxpr(lambda x: linear_call(lambda r, t: t, lambda r, c: c, (), x))(1.0)
+        primitive = jaxpr.eqns[0].primitive
+    except Exception:  # noqa: BLE001 (any failure means: no hook, plain autodiff)
+        return None
+    return primitive if primitive.name == "linear_call" else None
+
+
 @functools.cache
 def hook_installed() -> bool:
     """Install the ``linear_call`` batching rule if this JAX lacks one; False if unavailable."""
     if _jax_version() not in TESTED_JAX:
         return False
     try:
-        from jax._src.core import jaxpr_as_fun
-        from jax._src.custom_derivatives import linear_call_p
-        from jax._src.interpreters import batching
+        from jax.extend.core import jaxpr_as_fun
+        from jax.interpreters import batching
     except ImportError:
+        return False
+    linear_call_p = _linear_call_primitive()
+    if linear_call_p is None:
         return False
     if linear_call_p in getattr(batching, "fancy_primitive_batchers", {}):
         return True
