@@ -306,8 +306,9 @@ def read_setup(path) -> dict:
     if s["fluid"] is not None and s["solid"] is not None:
         raise SetupError(
             "solid",
-            "a fluid and a solid in one set-up need a fluid-solid coupling, which sphjax does "
-            "not have yet; describe them in separate files",
+            "a fluid and a solid in one set-up are not supported by set-up files yet; "
+            "describe them in separate files, or use a coupled case such as "
+            "'sphjax run hydrostatic_fsi_plate'",
         )
     return s
 
