@@ -118,6 +118,27 @@ def _fluid_solid_state(fluid, walls, solid, clamped, dx, depth_of):
     return x, kind, initial_state
 
 
+#: the fluid of every coupled case: continuity density (eq. 11), Tait (eq. 12), Monaghan's
+#: artificial viscosity and Molteni & Colagrossi's delta-SPH
+WEAKLY_COMPRESSIBLE = dict(
+    density="continuity", gamma=GAMMA, artificial_viscosity=True, density_diffusion="molteni"
+)
+
+
+def _coupled_params(g, rho_f, c0, artificial_alpha, E, poisson_ratio, rho_s):
+    """Params of a 2D coupled case: gravity along -y, the fluid's and the solid's groups."""
+    return make_params(
+        2,
+        gravity=(0.0, -g),
+        reference_density=rho_f,
+        sound_speed=c0,
+        artificial_alpha=artificial_alpha,
+        young_modulus=E,
+        poisson_ratio=poisson_ratio,
+        solid_density=rho_s,
+    )
+
+
 def _finish(name, model, params, initial_state, t_end, info, cfl):
     state = initial_state(params)
     dt = stable_time_step(state, model, params, solid_cfl=cfl)
@@ -201,22 +222,10 @@ def hydrostatic_fsi_plate(
         fluid, walls, plate, clamped, dx, lambda x: H - x[:, 1]
     )
     c0 = sound_speed_factor * math.sqrt(g * H)
-    params = make_params(
-        2,
-        gravity=(0.0, -g),
-        reference_density=rho_f,
-        sound_speed=c0,
-        artificial_alpha=artificial_alpha,
-        young_modulus=E,
-        poisson_ratio=poisson_ratio,
-        solid_density=rho_s,
-    )
+    params = _coupled_params(g, rho_f, c0, artificial_alpha, E, poisson_ratio, rho_s)
     margin = (n_clamp + 2) * dx
     domain = Domain((-margin, -t - margin), (L + margin, tank_height + H + margin), (False,) * 2)
-    fluid_kw = dict(
-        density="continuity", gamma=GAMMA, artificial_viscosity=True, density_diffusion="molteni"
-    )
-    model = _fsi_model(kernel, h, domain, fluid_kw, "no_slip", False, True)
+    model = _fsi_model(kernel, h, domain, WEAKLY_COMPRESSIBLE, "no_slip", False, True)
     D = E * t**3 / (12.0 * (1.0 - poisson_ratio**2))
     omega = 22.373 / L**2 * math.sqrt(D / (rho_s * t))  # clamped-clamped first mode (dry)
     if t_end is None:
@@ -310,24 +319,12 @@ def elastic_gate_dam_break(
         fluid, walls, gate, clamped, dx, lambda x: Hc - x[:, 1]
     )
     c0 = sound_speed_factor * math.sqrt(g * Hc)
-    params = make_params(
-        2,
-        gravity=(0.0, -g),
-        reference_density=rho_f,
-        sound_speed=c0,
-        artificial_alpha=artificial_alpha,
-        young_modulus=E,
-        poisson_ratio=poisson_ratio,
-        solid_density=rho_s,
-    )
+    params = _coupled_params(g, rho_f, c0, artificial_alpha, E, poisson_ratio, rho_s)
     margin = (layers + 2) * dx
     domain = Domain(
         (-margin, -margin), (W + (n + n_out) * dx + margin, tank_height + margin), (False,) * 2
     )
-    fluid_kw = dict(
-        density="continuity", gamma=GAMMA, artificial_viscosity=True, density_diffusion="molteni"
-    )
-    model = _fsi_model(kernel, h, domain, fluid_kw, "no_slip", False, True)
+    model = _fsi_model(kernel, h, domain, WEAKLY_COMPRESSIBLE, "no_slip", False, True)
     gate_mask = kind == Kind.SOLID
     bottom = np.flatnonzero(gate_mask & (x[:, 1] < dx))
     centre = W + 0.5 * tg
@@ -415,22 +412,10 @@ def dam_break_elastic_obstacle(
         fluid, walls, plate, clamped, dx, lambda x: H - x[:, 1]
     )
     c0 = sound_speed_factor * math.sqrt(g * H)
-    params = make_params(
-        2,
-        gravity=(0.0, -g),
-        reference_density=rho_f,
-        sound_speed=c0,
-        artificial_alpha=artificial_alpha,
-        young_modulus=E,
-        poisson_ratio=poisson_ratio,
-        solid_density=rho_s,
-    )
+    params = _coupled_params(g, rho_f, c0, artificial_alpha, E, poisson_ratio, rho_s)
     margin = (layers + 2) * dx
     domain = Domain((-margin, -margin), (n_tank * dx + margin, 2.0 * tank_height), (False,) * 2)
-    fluid_kw = dict(
-        density="continuity", gamma=GAMMA, artificial_viscosity=True, density_diffusion="molteni"
-    )
-    model = _fsi_model(kernel, h, domain, fluid_kw, "no_slip", False, True)
+    model = _fsi_model(kernel, h, domain, WEAKLY_COMPRESSIBLE, "no_slip", False, True)
     solid = np.flatnonzero(kind == Kind.SOLID)
     top = solid[x[solid, 1] > x[solid, 1].max() - 0.5 * dx]
     centre = (i_plate + 0.5 * n) * dx
