@@ -28,10 +28,21 @@ import jax.numpy as jnp
 
 from sphjax.core.space import displacement_fn
 from sphjax.physics import fsi
+from sphjax.physics import pairs as pair_sums
 from sphjax.physics.boundary.system import WallSystem
-from sphjax.physics.fluid.momentum import pressure_acceleration, transport_stress_acceleration
+from sphjax.physics.fluid.momentum import (
+    pressure_acceleration,
+    pressure_acceleration_pullback,
+    transport_stress_acceleration,
+    transport_stress_acceleration_pullback,
+)
 from sphjax.physics.fluid.system import FluidSystem
-from sphjax.physics.fluid.viscosity import monaghan_pi, morris_acceleration
+from sphjax.physics.fluid.viscosity import (
+    monaghan_pi,
+    monaghan_pi_pullback,
+    morris_acceleration,
+    morris_acceleration_pullback,
+)
 from sphjax.physics.solid.penalty import penalty_force
 from sphjax.physics.solid.system import SolidSystem
 
@@ -66,6 +77,72 @@ def _hydrodynamic_summand(pair, a, b, shared, *, h, artificial, morris, stress, 
             pair, unit, p_transport, a["rho"], p_transport, b["rho"]
         )
     return out
+
+
+def _hydrodynamic_pullback(
+    pair, a, b, shared, bar, *, h, artificial, morris, stress, shift, viscous
+):
+    """Reverse mode of :func:`_hydrodynamic_summand`, written out per pair from the
+    terms' own pull-backs (:func:`pressure_acceleration_pullback`, ...): the cotangents of
+    the pair geometry ``(r_ab, |r_ab|, W, grad_a W)``, of ``a``'s and ``b``'s fields and of
+    the parameters, for the cotangent ``bar`` of the summand's output (see
+    :func:`sphjax.physics.pairs.define_pullback`)."""
+    c0, alpha, beta, nu, p_transport = shared
+    unit = jnp.ones_like(pair.r)
+    cot = pair_sums.Cotangents()
+    v_ab = a["v"] - b["vv"]
+    pi_ab = 0.0
+    if artificial and viscous:
+        pi_ab = monaghan_pi(pair, v_ab, a["rho"], b["rho"], c0, h, alpha, beta)
+    pressure = pressure_acceleration_pullback(
+        pair, unit, a["p"], a["rho"], b["p"], b["rho"], pi_ab, bar["a"]
+    )
+    cot.pair(grad_w=pressure["grad_w"])
+    cot.a(p=pressure["pressure_a"], rho=pressure["density_a"])
+    cot.b(p=pressure["pressure_b"], rho=pressure["density_b"])
+    v_ab_bar = 0.0
+    if artificial and viscous:
+        pi = monaghan_pi_pullback(
+            pair, v_ab, a["rho"], b["rho"], c0, h, alpha, beta, pressure["pi_ab"]
+        )
+        cot.pair(dr=pi["dr"], r=pi["r"])
+        cot.a(rho=pi["density_a"])
+        cot.b(rho=pi["density_b"])
+        cot.shared(0, pi["sound_speed"])
+        cot.shared(1, pi["alpha"])
+        cot.shared(2, pi["beta"])
+        v_ab_bar = v_ab_bar + pi["v_ab"]
+    if morris and viscous:
+        viscous_bar = morris_acceleration_pullback(
+            pair, v_ab, unit, a["rho"], b["rho"], nu, h, bar["a"]
+        )
+        cot.pair(dr=viscous_bar["dr"], r=viscous_bar["r"], grad_w=viscous_bar["grad_w"])
+        cot.a(rho=viscous_bar["density_a"])
+        cot.b(rho=viscous_bar["density_b"])
+        cot.shared(3, viscous_bar["nu"])
+        v_ab_bar = v_ab_bar + viscous_bar["v_ab"]
+    if stress:
+        flux = transport_stress_acceleration_pullback(
+            pair, unit, a["rho"], b["rho"], a["v"], b["v"], a["dv"], b["dv"], bar["a"]
+        )
+        cot.pair(grad_w=flux["grad_w"])
+        cot.a(rho=flux["density_a"], v=flux["v_a"], dv=flux["dv_a"])
+        cot.b(rho=flux["density_b"], v=flux["v_b"], dv=flux["dv_b"])
+    if (artificial or morris) and viscous:
+        cot.a(v=v_ab_bar)
+        cot.b(vv=-v_ab_bar)
+    if shift:
+        background = pressure_acceleration_pullback(
+            pair, unit, p_transport, a["rho"], p_transport, b["rho"], 0.0, bar["shift"]
+        )
+        cot.pair(grad_w=background["grad_w"])
+        cot.a(rho=background["density_a"])
+        cot.b(rho=background["density_b"])
+        cot.shared(4, background["pressure_a"] + background["pressure_b"])
+    return cot.result(len(shared))
+
+
+pair_sums.define_pullback(_hydrodynamic_summand, _hydrodynamic_pullback)
 
 
 def _fluid_shared(system: FluidSystem, ctx):

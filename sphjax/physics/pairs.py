@@ -35,6 +35,7 @@ which keeps forward mode (``jvp``, ``jacfwd``) autodiff's; it gives first deriva
 from __future__ import annotations
 
 import dataclasses
+import functools
 from collections.abc import Callable
 
 import jax
@@ -136,9 +137,32 @@ class Geometry:
         """
         factor, g, inverse_r = factors
         dr = pair.dr
-        radial = bar.r * inverse_r + bar.w * factor + g * dot(dr, bar.grad_w)
-        direct = jnp.where(pair.mask[..., None], bar.dr, 0.0)
-        return direct + factor[..., None] * bar.grad_w + radial[..., None] * dr
+        # a hand-written pull-back (define_pullback) gives a literal 0.0 for the fields
+        # it does not read: those terms are left out, and so is the kernel's curvature G
+        # when grad W has no cotangent
+        radial = [
+            term
+            for term, field in (
+                (lambda: bar.r * inverse_r, bar.r),
+                (lambda: bar.w * factor, bar.w),
+                (lambda: g * dot(dr, bar.grad_w), bar.grad_w),
+            )
+            if not _is_zero(field)
+            for term in (term(),)
+        ]
+        out = []
+        if not _is_zero(bar.dr):
+            out.append(jnp.where(pair.mask[..., None], bar.dr, 0.0))
+        if not _is_zero(bar.grad_w):
+            out.append(factor[..., None] * bar.grad_w)
+        if radial:
+            out.append(sum(radial)[..., None] * dr)
+        return sum(out) if out else jnp.zeros_like(dr)
+
+
+def _is_zero(cotangent) -> bool:
+    """A cotangent known to be zero when the program is traced (a Python ``0.0``)."""
+    return isinstance(cotangent, int | float) and cotangent == 0
 
 
 @pytree_dataclass(static=("n_rows", "n_cols"))
@@ -166,6 +190,101 @@ class PairList:
     n_cols: int
     members: jax.Array | None = None
     transpose_members: jax.Array | None = None
+
+
+def define_pullback(summand: Callable, pullback: Callable) -> None:
+    """Attach a hand-written reverse mode to the per-pair ``summand`` of a pair sum.
+
+    ``pullback(pair, a, b, shared, bar, **keywords)`` (``keywords``: those of a
+    ``functools.partial`` of ``summand``) returns, for the cotangent ``bar`` of
+    ``summand(pair, a, b, shared, **keywords)`` (its output pytree, per pair), the tuple
+    ``(pair_bar, a_bar, b_bar, shared_bar)``: the cotangents of the pair geometry's
+    ``(dr, r, w, grad_w)`` (``0.0`` for none), dicts of per-pair cotangents of the fields of
+    ``a`` and of ``b`` it reads (missing keys are zero), and one per-pair cotangent per leaf
+    of ``shared``.  Build it with :class:`Cotangents`.  The adjoint of :func:`pair_sum`
+    then uses it instead of ``jax.vjp`` of the summand, whose generated code keeps more
+    per-pair arrays; a test must check it against ``jax.vjp``
+    (``tests/test_pullbacks.py``).
+    """
+    summand.pullback = pullback
+
+
+def _pullback_of(f):
+    """The hand-written pull-back of the summand ``f`` (a function or a
+    ``functools.partial`` of one), or ``None``."""
+    func = f.func if isinstance(f, functools.partial) else f
+    hand = getattr(func, "pullback", None)
+    if hand is None:
+        return None
+    return functools.partial(hand, **f.keywords) if isinstance(f, functools.partial) else hand
+
+
+class Cotangents:
+    """Accumulates the cotangents of a hand-written pull-back by name (see
+    :func:`define_pullback`)."""
+
+    def __init__(self):
+        self._pair, self._a, self._b, self._shared = {}, {}, {}, {}
+
+    @staticmethod
+    def _add(store, items):
+        for key, value in items.items():
+            store[key] = value if key not in store else store[key] + value
+
+    def pair(self, **cotangents):
+        """Add cotangents of the pair geometry's ``dr``, ``r``, ``w``, ``grad_w``."""
+        self._add(self._pair, cotangents)
+
+    def a(self, **cotangents):
+        """Add cotangents of the row particle's fields."""
+        self._add(self._a, cotangents)
+
+    def b(self, **cotangents):
+        """Add cotangents of the neighbour's fields."""
+        self._add(self._b, cotangents)
+
+    def shared(self, index: int, cotangent):
+        """Add the cotangent of leaf ``index`` of the shared parameters."""
+        self._add(self._shared, {index: cotangent})
+
+    def result(self, n_shared: int):
+        pair = tuple(self._pair.get(k, 0.0) for k in ("dr", "r", "w", "grad_w"))
+        shared = [self._shared.get(i, 0.0) for i in range(n_shared)]
+        return pair, dict(self._a), dict(self._b), shared
+
+
+def _contract(out, bar):
+    """``sum over components of out * bar`` per pair (the cotangent of a weight that
+    multiplies ``out``)."""
+    leaves = jax.tree_util.tree_leaves
+    total = 0.0
+    for o, b in zip(leaves(out), leaves(bar), strict=True):
+        product = o * b
+        total = total + jnp.sum(product, axis=tuple(range(2, product.ndim)))
+    return total
+
+
+def _field_sums(bar: dict, fields: dict, shape):
+    """Per-pair cotangents ``bar`` (a subset of ``fields``' keys) summed over the
+    neighbours, zeros for the fields they do not mention: a dict like ``fields``'s rows."""
+    out = {}
+    for key, value in fields.items():
+        if key in bar:
+            full = jnp.broadcast_to(bar[key], shape + value.shape[1:]).astype(value.dtype)
+            out[key] = jnp.sum(full, axis=1)
+        else:
+            out[key] = jnp.zeros_like(value)
+    return out
+
+
+def _shared_sums(bar, shared, shape):
+    """Per-pair cotangents of the shared leaves summed over the block's pairs."""
+    leaves, treedef = jax.tree_util.tree_flatten(shared)
+    sums = [
+        jnp.sum(jnp.broadcast_to(b, shape + jnp.shape(s)), axis=(0, 1)).astype(jnp.result_type(s))
+        for b, s in zip(bar, leaves, strict=True)
+    ]
+    return jax.tree_util.tree_unflatten(treedef, sums)
 
 
 def _split_blocks(a, n_blocks, block, pad, pad_index):
@@ -301,6 +420,39 @@ def _adjoint_self(f, weight, parity, geometry, block, fields, shared, idx, obar)
         term = _masked(f(pair, a, b, s), pair.mask)
         return _scale(term, b[weight]), _scale(term, parity * a[weight])
 
+    hand = _pullback_of(f)
+
+    def by_hand(pair, a, b, s, obar_a, obar_b):
+        """``(pair_bar, a_bar, s_bar)`` of both roles from the hand-written pull-back."""
+        if parity is not None:
+            bar = _masked(
+                tree_map(
+                    lambda oa, ob: _scale(oa, b[weight]) + _scale(ob, parity * a[weight]),
+                    obar_a,
+                    obar_b,
+                ),
+                pair.mask,
+            )
+            pair_bar, a_bar, _, s_bar = hand(pair, a, b, s, bar)
+            if weight is not None:
+                term = _masked(f(pair, a, b, s), pair.mask)
+                a_bar = {**a_bar, weight: a_bar.get(weight, 0.0) + parity * _contract(term, obar_b)}
+            return pair_bar, a_bar, [0.5 * q for q in s_bar]
+        as_row = obar_a if weight is None else _scale(obar_a, b[weight])
+        pair_bar, a_bar, _, s_bar = hand(pair, a, b, s, _masked(as_row, pair.mask))
+        swapped = pair.swapped()
+        as_neighbour = obar_b if weight is None else _scale(obar_b, a[weight])
+        swapped_bar, _, a_as_b, _ = hand(swapped, b, a, s, _masked(as_neighbour, pair.mask))
+        dr1, r1, w1, g1 = pair_bar
+        dr2, r2, w2, g2 = swapped_bar
+        pair_bar = (dr1 - dr2, r1 + r2, w1 + w2, g1 - g2)
+        a_bar = dict(a_bar)
+        Cotangents._add(a_bar, a_as_b)
+        if weight is not None:
+            term = _masked(f(swapped, b, a, s), pair.mask)
+            a_bar[weight] = a_bar.get(weight, 0.0) + _contract(term, obar_b)
+        return pair_bar, a_bar, s_bar
+
     def one_block(args):
         fields_k, idx_k, obar_k = args
         valid = idx_k < n
@@ -309,6 +461,14 @@ def _adjoint_self(f, weight, parity, geometry, block, fields, shared, idx, obar)
         a = _per_pair(fields_k, idx_k.shape)
         dr = geometry.displacement(a["x"], b["x"])
         pair, factors = geometry._pairs_and_factors(dr, valid, second=True)
+        if hand is not None:
+            pair_bar, a_bar, s_bar = by_hand(
+                pair, a, b, shared, _per_pair(obar_k, idx_k.shape), _gather(obar, j)
+            )
+            dr_bar = Geometry.pullback(pair, factors, _with_mask(pair_bar, pair.mask))
+            a_bar = _field_sums(a_bar, fields_k, idx_k.shape)
+            a_bar["x"] = a_bar["x"] + jnp.sum(dr_bar, axis=1)
+            return a_bar, _shared_sums(s_bar, shared, idx_k.shape)
         _, pull = jax.vjp(
             lambda p, a, s: both_roles(_with_mask(p, pair.mask), a, b, s),
             _without_mask(pair),
@@ -332,12 +492,35 @@ def _rowwise_with_shared(one_block, rows, block, pad_index):
     return _rowwise(one_block, rows, block, pad_index, shared_output=True)
 
 
-def _adjoint_cross(f, geometry, block, rows, cols, shared, idx, transpose, obar, members=None):
-    """Cotangents of ``rows``, ``cols`` and ``shared`` for a sum of one system's rows over
-    another system's particles: one pass over the rows, one over the columns (over the
-    columns ``members`` only, when given: the rows of ``transpose``)."""
+def _adjoint_cross(
+    f, weight, geometry, block, rows, cols, shared, idx, transpose, obar, members=None
+):
+    """Cotangents of ``rows``, ``cols`` and ``shared`` for a sum ``w_b f(a, b)`` of one
+    system's rows over another system's particles: one pass over the rows, one over the
+    columns (over the columns ``members`` only, when given: the rows of ``transpose``)."""
     n_rows = jax.tree_util.tree_leaves(rows)[0].shape[0]
     n_cols = jax.tree_util.tree_leaves(cols)[0].shape[0]
+    hand = _pullback_of(f)
+    full = _weighted(f, weight)
+
+    def row_by_hand(pair, factors, rows_k, a, b, obar_a):
+        as_row = obar_a if weight is None else _scale(obar_a, b[weight])
+        pair_bar, a_bar, _, s_bar = hand(pair, a, b, shared, _masked(as_row, pair.mask))
+        dr_bar = Geometry.pullback(pair, factors, _with_mask(pair_bar, pair.mask))
+        a_bar = _field_sums(a_bar, rows_k, pair.mask.shape)
+        a_bar["x"] = a_bar["x"] + jnp.sum(dr_bar, axis=1)
+        return a_bar, _shared_sums(s_bar, shared, pair.mask.shape)
+
+    def column_by_hand(pair, factors, cols_k, a, b, obar_a):
+        as_row = obar_a if weight is None else _scale(obar_a, b[weight])
+        pair_bar, _, b_bar, _ = hand(pair, a, b, shared, _masked(as_row, pair.mask))
+        if weight is not None:
+            term = _masked(f(pair, a, b, shared), pair.mask)
+            b_bar = {**b_bar, weight: b_bar.get(weight, 0.0) + _contract(term, obar_a)}
+        dr_bar = Geometry.pullback(pair, factors, _with_mask(pair_bar, pair.mask))
+        b_bar = _field_sums(b_bar, cols_k, pair.mask.shape)
+        b_bar["x"] = b_bar["x"] - jnp.sum(dr_bar, axis=1)
+        return b_bar
 
     def row_block(args):
         rows_k, idx_k, obar_k = args
@@ -346,9 +529,11 @@ def _adjoint_cross(f, geometry, block, rows, cols, shared, idx, transpose, obar,
         a = _per_pair(rows_k, idx_k.shape)
         dr = geometry.displacement(a["x"], b["x"])
         pair, factors = geometry._pairs_and_factors(dr, valid, second=True)
+        if hand is not None:
+            return row_by_hand(pair, factors, rows_k, a, b, _per_pair(obar_k, idx_k.shape))
 
         def as_row(p, a, s):
-            return _masked(f(_with_mask(p, pair.mask), a, b, s), pair.mask)
+            return _masked(full(_with_mask(p, pair.mask), a, b, s), pair.mask)
 
         _, pull = jax.vjp(as_row, _without_mask(pair), a, shared)
         pair_bar, a_bar, s_bar = pull(_per_pair(obar_k, idx_k.shape))
@@ -366,10 +551,12 @@ def _adjoint_cross(f, geometry, block, rows, cols, shared, idx, transpose, obar,
         b = _per_pair(cols_k, idx_k.shape)
         dr = geometry.displacement(a["x"], b["x"])
         pair, factors = geometry._pairs_and_factors(dr, valid, second=True)
+        if hand is not None:
+            return column_by_hand(pair, factors, cols_k, a, b, obar_a)
 
         def as_neighbour(p, b):
             p = _with_mask(p, pair.mask)
-            return _masked(f(p, a, b, shared), pair.mask)
+            return _masked(full(p, a, b, shared), pair.mask)
 
         _, pull = jax.vjp(as_neighbour, _without_mask(pair), b)
         pair_bar, b_bar = pull(obar_a)
@@ -419,7 +606,7 @@ def _custom_sum(f, geometry, block, structure, same, weight=None, parity=None, c
             )
             return (*leaves(fields_bar), *leaves(shared_bar))
         rows_bar, cols_bar, shared_bar = _adjoint_cross(
-            full, geometry, block, rows, cols, shared, idx, transpose[0], obar, members
+            f, weight, geometry, block, rows, cols, shared, idx, transpose[0], obar, members
         )
         return (*leaves(rows_bar), *leaves(cols_bar), *leaves(shared_bar))
 
