@@ -6,6 +6,7 @@
     python docs/scripts/validate_3d.py duct --n 8 12 16
     python docs/scripts/validate_3d.py dam --n 8                # --t-end in T = t sqrt(2g/L)
     python docs/scripts/validate_3d.py cantilever --n 4 6 8
+    python docs/scripts/validate_3d.py spheric --n 8 --t-end 1.5   # SPHERIC benchmark 2
 
 Each run is stored in the JSON file under its own key (re-running replaces it) and printed
 as a Markdown table row; docs/validation_3d.md holds the tables.  Float32, as a user runs.
@@ -28,7 +29,9 @@ from sphjax.cases import (
     oscillation_stats,
     surge_front,
     tip_displacement,
+    water_height,
 )
+from sphjax.observables import probe_pressure
 
 DOCS = pathlib.Path(__file__).resolve().parents[1]
 # Martin & Moyce (1952), Table 2 (height 2L), (T, Z/L): the reference of record.
@@ -232,9 +235,76 @@ def dam(n, t_scaled, wall_slip="no_slip", dim=3):
     print(f"wall {wall:.0f} s, {case.n_particles} particles, {n_steps} steps")
 
 
+def spheric(n, t_end, every=0.01):
+    """SPHERIC benchmark 2: the four water heights and the eight box pressures, every
+    ``every`` seconds, against the MARIN measurements (docs/data/spheric_test2_heights.csv)."""
+    t0 = time.perf_counter()
+    case = sphjax.cases.spheric_dam_break_3d(n=n)
+    save_every = max(1, int(round(every / case.dt)))
+    n_steps = save_every * int(np.ceil(t_end / case.dt / save_every))
+    traj = sphjax.simulate(case, n_steps=n_steps, save_every=save_every)
+    wall = time.perf_counter() - t0
+    info = case.info
+    heights = {
+        g: np.asarray(water_height(traj.states, case, xy)).tolist()
+        for g, xy in info["gauges"].items()
+    }
+    pressures = {
+        p: np.asarray(probe_pressure(traj.states, case, xyz)).tolist()
+        for p, xyz in info["sensors"].items()
+    }
+    fluid = np.asarray(traj.states.kind[-1]) == Kind.FLUID
+    record = dict(
+        n=n,
+        dx=info["dx"],
+        particles=case.n_particles,
+        fluid_particles=int(fluid.sum()),
+        steps=n_steps,
+        dt=case.dt,
+        t=np.asarray(traj.times).tolist(),
+        heights=heights,
+        pressures=pressures,
+        finite=bool(np.all(np.isfinite(np.asarray(traj.states.position)))),
+        wall_s=wall,
+    )
+    _store(f"spheric_n{n}", record)
+    print(f"wall {wall:.0f} s, {case.n_particles} particles, {n_steps} steps")
+    _spheric_table(record)
+
+
+def _spheric_experiment():
+    """The MARIN water heights: columns t, H1, H2, H3, H4 (m)."""
+    return np.loadtxt(DOCS / "data" / "spheric_test2_heights.csv", delimiter=",", comments="#")
+
+
+def _spheric_table(record, gauges=("H2", "H3", "H4")):
+    """Per gauge: the mean absolute difference to the experiment over the run, relative
+    to the measured range, and the arrival time (first reading above 0.02 m)."""
+    exp = _spheric_experiment()
+    t = np.asarray(record["t"])
+    exp = exp[exp[:, 0] <= t[-1] + 1e-9]
+    rows = {}
+    for g in gauges:
+        col = int(g[1])
+        sim = np.interp(exp[:, 0], t, record["heights"][g])
+        mae = float(np.mean(np.abs(sim - exp[:, col])))
+        arrival = lambda times, h: float(times[np.argmax(np.asarray(h) > 0.02)])  # noqa: E731
+        rows[g] = dict(
+            mae=mae,
+            mae_rel=mae / float(np.ptp(exp[:, col])),
+            arrival=arrival(t, record["heights"][g]) if g != "H4" else None,
+            arrival_exp=arrival(exp[:, 0], exp[:, col]) if g != "H4" else None,
+        )
+        print(
+            f"| {record['n']} | {g} | {mae:.4f} | {rows[g]['mae_rel']:.1%} "
+            f"| {rows[g]['arrival']} | {rows[g]['arrival_exp']} |"
+        )
+    return rows
+
+
 def main():
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    p.add_argument("case", choices=["abc", "tank", "duct", "dam", "cantilever"])
+    p.add_argument("case", choices=["abc", "tank", "duct", "dam", "cantilever", "spheric"])
     p.add_argument("--n", type=int, nargs="*", default=None)
     p.add_argument("--reynolds", type=float, default=50.0)
     p.add_argument("--t-end", type=float, default=None)
@@ -258,6 +328,9 @@ def main():
     elif args.case == "cantilever":
         for n in args.n or [4, 6, 8]:
             cantilever(n, args.t_end or 0.55)
+    elif args.case == "spheric":
+        for n in args.n or [8]:
+            spheric(n, args.t_end or 1.5)
 
 
 if __name__ == "__main__":

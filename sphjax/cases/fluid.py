@@ -288,13 +288,17 @@ def _tank(
     t_end,
     info,
     fluid_height,
+    obstacle=None,
 ):
     """A tank ``[0, tank_upper]`` (2D or 3D, open at the top, gravity along the last
-    axis) of dummy walls around ``fluid``, with the hydrostatic initial density."""
+    axis) of dummy walls around ``fluid``, with the hydrostatic initial density;
+    ``obstacle`` (``[M, d]`` positions) adds wall particles inside the tank."""
     dim = fluid.shape[1]
     tank_upper = np.asarray(tank_upper, float)
     layers = wall_layers(kernel.support * h, dx)
     walls = box_walls([0.0] * dim, tank_upper, dx, layers, open_top=True)
+    if obstacle is not None:
+        walls = np.concatenate([walls, np.asarray(obstacle, float)])
     x = np.concatenate([fluid, walls])
     kind = np.concatenate([np.full(len(fluid), Kind.FLUID), np.full(len(walls), Kind.WALL)])
     # hydrostatic initial density so the column starts near equilibrium (eq. 12 inverted)
