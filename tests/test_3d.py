@@ -192,6 +192,39 @@ def test_duct_poiseuille_startup_and_white_profile():
     assert _rms(v[:, 0] - exact) < 0.03 * info["centre_speed"]
 
 
+# (case, arguments): particles, dt, sum of positions, sum of densities, as built before
+# the tank cases shared one assembly (sphjax/cases/fluid.py::_water_tank)
+TANK_CASES_BEFORE = [
+    ("hydrostatic_tank", dict(n=6), 114, 0.0019954714587537, 90.50000024586916, 114176.5349121),
+    (
+        "dam_break",
+        dict(n=4, column_width=1.2, column_height=0.6, tank_length_factor=2.6833),
+        89,
+        0.0023185282968048297,
+        140.40000158548355,
+        89009.95361328125,
+    ),
+    ("hydrostatic_tank_3d", dict(n=4), 784, 0.00299320718813055, 966.0, 784313.8955078125),
+    ("dam_break_3d", dict(n=4), 2708, 0.0005796320742012074, 2986.0499945878983, 2708159.208984),
+]
+
+
+@pytest.mark.parametrize("name, kwargs, particles, dt, x_sum, rho_sum", TANK_CASES_BEFORE)
+def test_tank_cases_build_as_before(name, kwargs, particles, dt, x_sum, rho_sum):
+    """The 2D and 3D tank and dam-break cases build the same particles, time step and
+    hydrostatic densities as before their assembly was shared (checked leaf by leaf when
+    it was; these sums pin it to float32 rounding: they were taken in float32)."""
+    case = sphjax.cases.get(name, **kwargs)
+    assert case.n_particles == particles
+    assert case.dt == pytest.approx(dt, rel=1e-6)
+    assert float(np.sum(np.asarray(case.state.position, np.float64))) == pytest.approx(
+        x_sum, rel=1e-6
+    )
+    assert float(np.sum(np.asarray(case.state.density, np.float64))) == pytest.approx(
+        rho_sum, rel=1e-6
+    )
+
+
 def test_spheric_dam_break_geometry_and_gauges():
     """SPHERIC benchmark 2 as built (no simulation): the tank, the column across the full
     width against the far wall, the box of wall particles where Kleefsman et al. (2005)

@@ -24,10 +24,10 @@ import numpy as np
 from sphjax.cases._geometry import check_positive, check_resolution, lattice, wall_layers
 from sphjax.cases._packing import periodic_neighbours, relax_periodic, summation_masses
 from sphjax.cases._systems import fluid_system, wall_system
-from sphjax.cases.fluid import _finish, _relax_iterations, _tank
+from sphjax.cases.fluid import WATER_DENSITY, _finish, _relax_iterations, _water_tank
 from sphjax.core import kernels
 from sphjax.core.case import Case
-from sphjax.core.kernels import WendlandC2, as_kernel
+from sphjax.core.kernels import as_kernel
 from sphjax.core.model import Domain, Model
 from sphjax.core.params import make_params
 from sphjax.core.state import Kind, make_state
@@ -225,32 +225,23 @@ def hydrostatic_tank_3d(
     g = check_positive("gravity", gravity)
     dx = H / n
     W, D = dx * max(1, round(W / dx)), dx * max(1, round(D / dx))
-    kernel, h = WendlandC2(), 1.5 * dx
-    rho0 = 1000.0
-    c0 = sound_speed_factor * math.sqrt(g * H)
     fluid = lattice([0.0, 0.0, 0.0], [W, D, H], dx)
-    info = dict(dx=dx, n=n, height=H, width=W, depth=D, gravity=g, bottom_pressure=rho0 * g * H)
-    return _tank(
+    info = dict(
+        dx=dx, n=n, height=H, width=W, depth=D, gravity=g, bottom_pressure=WATER_DENSITY * g * H
+    )
+    return _water_tank(
         "hydrostatic_tank_3d",
         fluid,
         (W, D, 1.2 * H),
         dx,
-        kernel,
-        h,
-        rho0,
         g,
-        c0,
-        dict(artificial_alpha=artificial_alpha),
-        dict(
-            density="continuity",
-            gamma=7.0,
-            artificial_viscosity=True,
-            density_diffusion="molteni",
-        ),
+        H,
+        sound_speed_factor,
+        artificial_alpha,
+        "molteni",
         "no_slip",
         t_end,
         info,
-        H,
     )
 
 
@@ -287,9 +278,6 @@ def dam_break_3d(
     Wy = L if tank_width is None else check_positive("tank_width", tank_width)
     Wy = dx * max(1, round(Wy / dx))
     H = 2.0 * L
-    kernel, h = WendlandC2(), 1.5 * dx
-    rho0 = 1000.0
-    c0 = sound_speed_factor * math.sqrt(g * H)
     tank_length = dx * round(tank_length_factor * L / dx)
     fluid = lattice([0.0, 0.0, 0.0], [L, Wy, H], dx)
     if t_end is None:
@@ -304,27 +292,19 @@ def dam_break_3d(
         gravity=g,
         time_scale=1.0 / math.sqrt(2 * g / L),
     )
-    return _tank(
+    return _water_tank(
         "dam_break_3d",
         fluid,
         (tank_length, Wy, 1.25 * H),
         dx,
-        kernel,
-        h,
-        rho0,
         g,
-        c0,
-        dict(artificial_alpha=artificial_alpha),
-        dict(
-            density="continuity",
-            gamma=7.0,
-            artificial_viscosity=True,
-            density_diffusion=density_diffusion,
-        ),
+        H,
+        sound_speed_factor,
+        artificial_alpha,
+        density_diffusion,
         wall_slip,
         t_end,
         info,
-        H,
     )
 
 
@@ -396,9 +376,6 @@ def spheric_dam_break_3d(
     lo, hi = (np.asarray(c) for c in SPHERIC_BOX)
     grid = lattice([0.0, 0.0, 0.0], [L, W, hi[2] + dx], dx)
     box = grid[np.all((grid > lo) & (grid < hi), axis=1)]
-    kernel, h = WendlandC2(), 1.5 * dx
-    rho0 = 1000.0
-    c0 = sound_speed_factor * math.sqrt(g * column_height)
     info = dict(
         dx=dx,
         n=n,
@@ -411,27 +388,19 @@ def spheric_dam_break_3d(
         gauges=dict(SPHERIC_GAUGES),
         sensors=dict(SPHERIC_SENSORS),
     )
-    return _tank(
+    return _water_tank(
         "spheric_dam_break_3d",
         fluid,
         (L, W, Ht),
         dx,
-        kernel,
-        h,
-        rho0,
         g,
-        c0,
-        dict(artificial_alpha=artificial_alpha),
-        dict(
-            density="continuity",
-            gamma=7.0,
-            artificial_viscosity=True,
-            density_diffusion=density_diffusion,
-        ),
+        column_height,
+        sound_speed_factor,
+        artificial_alpha,
+        density_diffusion,
         wall_slip,
         t_end,
         info,
-        column_height,
         obstacle=box,
     )
 
