@@ -236,11 +236,11 @@ def dam(n, t_scaled, wall_slip="no_slip", dim=3):
     print(f"wall {wall:.0f} s, {case.n_particles} particles, {n_steps} steps")
 
 
-def spheric(n, t_end, every=0.01):
+def spheric(n, t_end, wall_slip="no_slip", every=0.01):
     """SPHERIC benchmark 2: the four water heights and the eight box pressures, every
     ``every`` seconds, against the MARIN measurements (docs/data/spheric_test2_heights.csv)."""
     t0 = time.perf_counter()
-    case = sphjax.cases.spheric_dam_break_3d(n=n)
+    case = sphjax.cases.spheric_dam_break_3d(n=n, wall_slip=wall_slip)
     save_every = max(1, int(round(every / case.dt)))
     n_steps = save_every * int(np.ceil(t_end / case.dt / save_every))
     traj = sphjax.simulate(case, n_steps=n_steps, save_every=save_every)
@@ -266,9 +266,10 @@ def spheric(n, t_end, every=0.01):
         heights=heights,
         pressures=pressures,
         finite=bool(np.all(np.isfinite(np.asarray(traj.states.position)))),
+        wall_slip=wall_slip,
         wall_s=wall,
     )
-    _store(f"spheric_n{n}", record)
+    _store(f"spheric_n{n}" + ("" if wall_slip == "no_slip" else f"_{wall_slip}"), record)
     print(f"wall {wall:.0f} s, {case.n_particles} particles, {n_steps} steps")
     _spheric_table(record)
 
@@ -434,7 +435,7 @@ def main():
             cantilever(n, args.t_end or 0.55)
     elif args.case == "spheric":
         for n in args.n or [8]:
-            spheric(n, args.t_end or 1.5)
+            spheric(n, args.t_end or 1.5, args.wall_slip)
     elif args.case == "figures":
         figures()
 
