@@ -29,7 +29,6 @@ import math
 import os
 import subprocess
 import sys
-import time
 from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
@@ -42,6 +41,7 @@ from throughput import (  # noqa: E402
     peer_python,
     rate,
     summarise,
+    timed_runs,
 )
 
 
@@ -62,15 +62,7 @@ def run_sphjax(n: int, steps: int, repeats: int) -> dict:
         traj = sphjax.simulate(case, n_steps=steps, save_every=steps, dt=dt)
         jax.block_until_ready(traj.states.position)
 
-    t0 = time.perf_counter()
-    run()  # compile + warm-up
-    warmup = time.perf_counter() - t0
-    seconds, cpu_seconds = [], []
-    for _ in range(repeats):
-        t0, c0 = time.perf_counter(), time.process_time()
-        run()
-        seconds.append(time.perf_counter() - t0)
-        cpu_seconds.append(time.process_time() - c0)
+    warmup, seconds, cpu_seconds = timed_runs(run, repeats)
     return dict(
         code="sphjax",
         n_particles=case.n_particles,
