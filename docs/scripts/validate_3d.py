@@ -389,7 +389,7 @@ def figures():
     ax.legend(fontsize=8)
     save(fig, "dam_break_3d_front.png")
 
-    spheric_runs = sorted((k for k in data if k.startswith("spheric_n")), key=lambda k: int(k[9:]))
+    spheric_runs = sorted(k for k in data if k.startswith("spheric_n"))
     if spheric_runs:
         exp = _spheric_experiment()
         fig, axes = plt.subplots(2, 2, figsize=(9, 6), sharex=True)
@@ -397,7 +397,8 @@ def figures():
             ax.plot(exp[:, 0], exp[:, int(g[1])], "ko", ms=3, label="experiment (MARIN)")
             for key in spheric_runs:
                 r = data[key]
-                ax.plot(r["t"], r["heights"][g], label=f"sphjax, dx = {r['dx']:.3g} m")
+                slip = r.get("wall_slip", "no_slip").replace("_", "-")
+                ax.plot(r["t"], r["heights"][g], label=f"sphjax, dx = {r['dx']:.3g} m, {slip}")
             ax.set(title=g, ylabel="water height (m)")
         for ax in axes[1]:
             ax.set_xlabel("t (s)")
