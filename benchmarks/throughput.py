@@ -68,6 +68,21 @@ def time_step(n: int) -> float:
 # ---------------------------------------------------------------------------- sphjax
 
 
+def timed_runs(run, repeats: int):
+    """``run()`` once untimed (compilation, warm-up), then ``repeats`` times: the warm-up
+    seconds and the wall-clock and process-CPU seconds of each timed run."""
+    t0 = time.perf_counter()
+    run()
+    warmup = time.perf_counter() - t0
+    seconds, cpu_seconds = [], []
+    for _ in range(repeats):
+        t0, c0 = time.perf_counter(), time.process_time()
+        run()
+        seconds.append(time.perf_counter() - t0)
+        cpu_seconds.append(time.process_time() - c0)
+    return warmup, seconds, cpu_seconds
+
+
 def run_sphjax(n: int, steps: int, repeats: int, skin: float | None = None) -> dict:
     """Time ``sphjax.simulate`` on Taylor-Green with ``n x n`` particles (in-process)."""
     import jax
@@ -86,15 +101,7 @@ def run_sphjax(n: int, steps: int, repeats: int, skin: float | None = None) -> d
         jax.block_until_ready(traj.states.position)
         return traj
 
-    t0 = time.perf_counter()
-    run()  # compile + warm-up
-    compile_s = time.perf_counter() - t0
-    seconds, cpu_seconds = [], []
-    for _ in range(repeats):
-        t0, c0 = time.perf_counter(), time.process_time()
-        run()
-        seconds.append(time.perf_counter() - t0)
-        cpu_seconds.append(time.process_time() - c0)
+    compile_s, seconds, cpu_seconds = timed_runs(run, repeats)
     return dict(
         code="sphjax",
         n_particles=case.n_particles,

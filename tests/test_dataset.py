@@ -282,3 +282,65 @@ def test_dataset_command_reports_throughput_and_names_bad_input(tmp_path, capsys
     err = capsys.readouterr().err
     assert "holds files" in err and "--overwrite" in err and "Traceback" not in err
     assert len(err.strip().splitlines()) == 1
+
+
+@pytest.mark.parametrize("periodic", [(True, True, True), (True, False, False)])
+def test_random_velocity_field_3d_is_solenoidal_with_no_flow_through_walls(periodic):
+    """The 3D random field is the curl of a vector potential: zero divergence (central
+    differences, error O(e^2)), no normal flow on the walls of closed axes, largest speed
+    1; the same generator draws the same field (numpy only, < 1 s)."""
+    from sphjax.core.model import Domain
+    from sphjax.dataset import random_velocity_field
+
+    domain = Domain((0.0, 0.0, 0.0), (1.0, 2.0, 0.5), periodic)
+    size = np.asarray(domain.size)
+    x = np.random.default_rng(0).uniform(0.0, 1.0, (100, 3)) * size
+    e = 1e-5
+    shifted = [x] + [x + s * e * np.eye(3)[a] for a in range(3) for s in (1, -1)]
+    u = random_velocity_field(np.concatenate(shifted), domain, np.random.default_rng(4))
+    u = u.reshape(7, len(x), 3)
+    div = sum((u[1 + 2 * a][:, a] - u[2 + 2 * a][:, a]) / (2 * e) for a in range(3))
+    grad_scale = np.abs(u[1] - u[2]).max() / (2 * e)  # a velocity gradient, for scale
+    assert grad_scale > 1.0 and np.abs(div).max() < 1e-6 * grad_scale
+    assert np.linalg.norm(u, axis=2).max() == pytest.approx(1.0)
+    for axis in range(3):
+        if periodic[axis]:
+            continue
+        for wall in (0.0, size[axis]):
+            w = x.copy()
+            w[:, axis] = wall
+            normal = random_velocity_field(w, domain, np.random.default_rng(4))[:, axis]
+            assert np.abs(normal).max() < 1e-12
+    again = random_velocity_field(x, domain, np.random.default_rng(4))
+    np.testing.assert_array_equal(again, random_velocity_field(x, domain, np.random.default_rng(4)))
+
+
+def test_abc_flow_3d_dataset_metadata_and_frames(tmp_path, capsys):
+    """`sphjax dataset abc_flow_3d`: a 3D LagrangeBench dataset with dim 3, the periodic
+    unit cube as bounds, positions [T, N, 3] wrapped into the box, a random start per
+    trajectory, statistics per axis and the throughput line (~10 s)."""
+    from sphjax.cli import main
+    from sphjax.dataset import check_metadata, statistics
+    from sphjax.surrogate import data
+
+    out = tmp_path / "abc"
+    argv = ["dataset", "abc_flow_3d", "--out", str(out), "--case-arg", "n=8"]
+    argv += ["--case-arg", "relax_iterations=0", "--n-train", "2", "--n-valid", "0"]
+    argv += ["--n-test", "1", "--steps", "8", "--write-every", "4", "--no-progress"]
+    assert main(argv) == 0
+    assert "trajectories per minute" in capsys.readouterr().out
+    meta = json.loads((out / "metadata.json").read_text())
+    check_metadata(meta)
+    assert meta["dim"] == 3 and meta["case"] == "abc_flow_3d"
+    assert meta["bounds"] == [[0.0, 1.0]] * 3
+    assert meta["periodic_boundary_conditions"] == [True, True, True]
+    assert meta["num_particles_max"] == 8**3 and meta["sequence_length_train"] == 3
+    assert len(meta["vel_std"]) == 3 and min(meta["vel_std"]) > 0
+    train = data.load(out, "train")
+    x = train.positions
+    assert x.shape == (2, 3, 8**3, 3) and x.dtype == np.float32
+    assert np.all((x >= 0.0) & (x < 1.0))
+    assert np.all(train.particle_type == 0)
+    assert not np.allclose(x[0, 1], x[1, 1])  # each trajectory its own start
+    stats = statistics(list(x), list(train.particle_type), meta["bounds"], [True] * 3)
+    np.testing.assert_allclose(stats["vel_std"], meta["vel_std"], rtol=1e-6)

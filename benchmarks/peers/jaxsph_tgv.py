@@ -1,4 +1,8 @@
-"""Time JAX-SPH 0.1.0 on the 2D Taylor-Green vortex (run with the JAX-SPH venv's python).
+"""Time JAX-SPH 0.1.0 on the Taylor-Green vortex (run with the JAX-SPH venv's python).
+
+``--dim 2``: the periodic unit square; ``--dim 3``: JAX-SPH's own 3D Taylor-Green set-up,
+the periodic cube ``[0, 2 pi)^3`` with ``u = sin x cos y cos z``,
+``v = -cos x sin y cos z``, ``w = 0`` (``nu = 0.02``).
 
 JAX-SPH's wheel ships no case files, so this script defines the Taylor-Green set-up as a
 ``jax_sph.case_setup.SimulationSetup`` and then does what ``jax_sph.simulate.simulate``
@@ -31,13 +35,14 @@ from jax_sph.utils import Tag  # noqa: E402
 
 
 class TaylorGreen(SimulationSetup):
-    """Periodic unit square, ``u = -cos(2 pi x) sin(2 pi y)``, ``v = sin(2 pi x) cos(2 pi y)``."""
+    """Periodic unit square, ``u = -cos(2 pi x) sin(2 pi y)``, ``v = sin(2 pi x) cos(2 pi y)``;
+    in 3D the periodic cube of side ``2 pi`` (JAX-SPH's 3D set-up)."""
 
     def _box_size2D(self, n_walls):
         return np.array([1.0, 1.0])
 
     def _box_size3D(self, n_walls):
-        raise NotImplementedError
+        return 2.0 * np.pi * np.ones(3)
 
     def _init_walls_2d(self):
         pass
@@ -55,7 +60,14 @@ class TaylorGreen(SimulationSetup):
         )
 
     def _init_velocity3D(self, r):
-        raise NotImplementedError
+        x, y, z = r
+        return jnp.array(
+            [
+                jnp.sin(x) * jnp.cos(y) * jnp.cos(z),
+                -jnp.cos(x) * jnp.sin(y) * jnp.cos(z),
+                jnp.zeros_like(x),
+            ]
+        )
 
     def _external_acceleration_fn(self, r):
         return jnp.zeros_like(r)
@@ -71,14 +83,18 @@ def main():
     parser.add_argument("--repeats", type=int, default=2)
     parser.add_argument("--dt", type=float, required=True)
     parser.add_argument("--threads", type=int, default=2, help="unused (XLA uses all cores)")
+    parser.add_argument("--dim", type=int, default=2, choices=[2, 3])
+    parser.add_argument(
+        "--warmup-steps", type=int, default=20, help="untimed steps after compiling"
+    )
     args = parser.parse_args()
 
     cfg = set_defaults()
     cfg.config = "tgv.yaml"
     cfg.case.source = "tgv.py"
-    cfg.case.dim = 2
-    cfg.case.dx = 1.0 / args.n
-    cfg.case.viscosity = 0.01
+    cfg.case.dim = args.dim
+    cfg.case.dx = (1.0 if args.dim == 2 else 2.0 * np.pi) / args.n
+    cfg.case.viscosity = 0.01 if args.dim == 2 else 0.02
     cfg.case.u_ref = 1.0
     cfg.case.c_ref_factor = 10.0
     cfg.solver.name = "SPH"
@@ -145,7 +161,7 @@ def main():
 
     t0 = time.perf_counter()
     state, neighbors = advance(0.0, state, neighbors)  # compile, initial accelerations
-    state, neighbors = run(state, neighbors, 20)
+    state, neighbors = run(state, neighbors, args.warmup_steps)
     warmup = time.perf_counter() - t0
     seconds, cpu_seconds = [], []
     for _ in range(args.repeats):

@@ -6,6 +6,8 @@
     python docs/scripts/validate_3d.py duct --n 8 12 16
     python docs/scripts/validate_3d.py dam --n 8                # --t-end in T = t sqrt(2g/L)
     python docs/scripts/validate_3d.py cantilever --n 4 6 8
+    python docs/scripts/validate_3d.py spheric --n 8 --t-end 1.5   # SPHERIC benchmark 2
+    python docs/scripts/validate_3d.py figures        # docs/img/*_3d.png from the JSON file
 
 Each run is stored in the JSON file under its own key (re-running replaces it) and printed
 as a Markdown table row; docs/validation_3d.md holds the tables.  Float32, as a user runs.
@@ -28,7 +30,9 @@ from sphjax.cases import (
     oscillation_stats,
     surge_front,
     tip_displacement,
+    water_height,
 )
+from sphjax.observables import probe_pressure
 
 DOCS = pathlib.Path(__file__).resolve().parents[1]
 # Martin & Moyce (1952), Table 2 (height 2L), (T, Z/L): the reference of record.
@@ -232,9 +236,181 @@ def dam(n, t_scaled, wall_slip="no_slip", dim=3):
     print(f"wall {wall:.0f} s, {case.n_particles} particles, {n_steps} steps")
 
 
+def spheric(n, t_end, wall_slip="no_slip", every=0.01):
+    """SPHERIC benchmark 2: the four water heights and the eight box pressures, every
+    ``every`` seconds, against the MARIN measurements (docs/data/spheric_test2_heights.csv)."""
+    t0 = time.perf_counter()
+    case = sphjax.cases.spheric_dam_break_3d(n=n, wall_slip=wall_slip)
+    save_every = max(1, int(round(every / case.dt)))
+    n_steps = save_every * int(np.ceil(t_end / case.dt / save_every))
+    traj = sphjax.simulate(case, n_steps=n_steps, save_every=save_every)
+    wall = time.perf_counter() - t0
+    info = case.info
+    heights = {
+        g: np.asarray(water_height(traj.states, case, xy)).tolist()
+        for g, xy in info["gauges"].items()
+    }
+    pressures = {
+        p: np.asarray(probe_pressure(traj.states, case, xyz)).tolist()
+        for p, xyz in info["sensors"].items()
+    }
+    fluid = np.asarray(traj.states.kind[-1]) == Kind.FLUID
+    record = dict(
+        n=n,
+        dx=info["dx"],
+        particles=case.n_particles,
+        fluid_particles=int(fluid.sum()),
+        steps=n_steps,
+        dt=case.dt,
+        t=np.asarray(traj.times).tolist(),
+        heights=heights,
+        pressures=pressures,
+        finite=bool(np.all(np.isfinite(np.asarray(traj.states.position)))),
+        wall_slip=wall_slip,
+        wall_s=wall,
+    )
+    _store(f"spheric_n{n}" + ("" if wall_slip == "no_slip" else f"_{wall_slip}"), record)
+    print(f"wall {wall:.0f} s, {case.n_particles} particles, {n_steps} steps")
+    _spheric_table(record)
+
+
+def _spheric_experiment():
+    """The MARIN water heights: columns t, H1, H2, H3, H4 (m)."""
+    return np.loadtxt(DOCS / "data" / "spheric_test2_heights.csv", delimiter=",", comments="#")
+
+
+def _spheric_table(record, gauges=("H2", "H3", "H4")):
+    """Per gauge: the mean absolute difference to the experiment over the run, relative
+    to the measured range, and the arrival time (first reading above 0.02 m)."""
+    exp = _spheric_experiment()
+    t = np.asarray(record["t"])
+    exp = exp[exp[:, 0] <= t[-1] + 1e-9]
+    rows = {}
+    for g in gauges:
+        col = int(g[1])
+        sim = np.interp(exp[:, 0], t, record["heights"][g])
+        mae = float(np.mean(np.abs(sim - exp[:, col])))
+        arrival = lambda times, h: float(times[np.argmax(np.asarray(h) > 0.02)])  # noqa: E731
+        rows[g] = dict(
+            mae=mae,
+            mae_rel=mae / float(np.ptp(exp[:, col])),
+            arrival=arrival(t, record["heights"][g]) if g != "H4" else None,
+            arrival_exp=arrival(exp[:, 0], exp[:, col]) if g != "H4" else None,
+        )
+        print(
+            f"| {record['n']} | {g} | {mae:.4f} | {rows[g]['mae_rel']:.1%} "
+            f"| {rows[g]['arrival']} | {rows[g]['arrival_exp']} |"
+        )
+    return rows
+
+
+def figures():
+    """The figures of docs/validation_3d.md, from the stored runs (no simulation)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    data = json.loads(RESULTS.read_text())
+    img = DOCS / "img"
+
+    def save(fig, name):
+        fig.tight_layout()
+        fig.savefig(img / name, dpi=110)
+        plt.close(fig)
+        print(f"wrote docs/img/{name}")
+
+    fig, (ax, ax_err) = plt.subplots(1, 2, figsize=(9, 3.8))
+    first = True
+    for n in (10, 12, 16, 20):
+        r = data.get(f"abc_n{n}_re50_relaxed")
+        if r is None:
+            continue
+        if first:
+            ax.plot(r["times"], r["ke_exact"], "k-", lw=2, label="exact, exp(-2 nu k^2 t)")
+            first = False
+        ke, exact = np.asarray(r["ke_ratio"]), np.asarray(r["ke_exact"])
+        ax.plot(r["times"], ke, "o--", ms=3, label=f"sphjax, {n}^3")
+        ax_err.plot(r["times"], 100 * (ke / exact - 1), "o-", ms=3, label=f"{n}^3")
+    ax.set(xlabel="t", ylabel="KE / KE(0)", title="ABC flow, Re = 50 (relaxed start)")
+    ax.legend()
+    ax_err.set(xlabel="t", ylabel="KE error (%)", title="against the exact decay")
+    ax_err.axhline(0.0, color="k", lw=0.8)
+    ax_err.legend()
+    save(fig, "abc_3d_ke.png")
+
+    fig, ax = plt.subplots(figsize=(5.5, 3.8))
+    for n in (8, 12, 16):
+        r = data.get(f"duct_n{n}")
+        if r is None:
+            continue
+        (line,) = ax.plot(
+            r["times"], np.asarray(r["centre"]) * 1e6, "o--", ms=3, label=f"sphjax, {n} across"
+        )
+        ax.plot(
+            r["times"],
+            np.asarray(r["centre_exact"]) * 1e6,
+            "-",
+            color=line.get_color(),
+            lw=1,
+            label=f"series at the same particles ({n})",
+        )
+    ax.set(xlabel="t (s)", ylabel="speed near the axis (um/s)", title="Square duct, start-up")
+    ax.legend()
+    save(fig, "duct_3d_centre.png")
+
+    fig, ax = plt.subplots(figsize=(6.5, 3.8))
+    for n in (4, 6, 8):
+        r = data.get(f"cantilever_n{n}")
+        if r is None:
+            continue
+        ax.plot(r["times"], np.asarray(r["tip_y"]) * 1e3, lw=1, label=f"sphjax, {n} x {n} section")
+    if r is not None:
+        t = np.linspace(0.0, max(r["times"]), 400)
+        omega = 2 * np.pi / r["reference_period"]
+        ax.plot(
+            t, r["reference_amplitude"] * np.sin(omega * t) * 1e3, "k--", label="Euler-Bernoulli"
+        )
+    ax.set(xlabel="t (s)", ylabel="tip u_y (mm)", title="Cantilever, square section")
+    ax.legend(fontsize=8)
+    save(fig, "cantilever_3d_tip.png")
+
+    fig, ax = plt.subplots(figsize=(5.5, 3.8))
+    ax.plot(MARTIN_MOYCE[:, 0], MARTIN_MOYCE[:, 1], "ks", label="Martin & Moyce (1952)")
+    for key, label in (
+        ("dam_n8_no_slip_3d", "3D, no-slip"),
+        ("dam_n8_free_slip_3d", "3D, free-slip"),
+        ("dam_n8_no_slip_2d", "2D, no-slip"),
+    ):
+        r = data.get(key)
+        if r is not None:
+            ax.plot(r["T"], r["front"], label=f"sphjax {label}, n = 8")
+    ax.set(xlabel="T = t sqrt(2g/L)", ylabel="Z / L", title="Dam break, surge front", xlim=(0, 2.7))
+    ax.legend(fontsize=8)
+    save(fig, "dam_break_3d_front.png")
+
+    spheric_runs = sorted(k for k in data if k.startswith("spheric_n"))
+    if spheric_runs:
+        exp = _spheric_experiment()
+        fig, axes = plt.subplots(2, 2, figsize=(9, 6), sharex=True)
+        for ax, g in zip(axes.ravel(), ("H1", "H2", "H3", "H4"), strict=True):
+            ax.plot(exp[:, 0], exp[:, int(g[1])], "ko", ms=3, label="experiment (MARIN)")
+            for key in spheric_runs:
+                r = data[key]
+                slip = r.get("wall_slip", "no_slip").replace("_", "-")
+                ax.plot(r["t"], r["heights"][g], label=f"sphjax, dx = {r['dx']:.3g} m, {slip}")
+            ax.set(title=g, ylabel="water height (m)")
+        for ax in axes[1]:
+            ax.set_xlabel("t (s)")
+        axes[0, 0].legend(fontsize=8)
+        save(fig, "spheric_3d_heights.png")
+
+
 def main():
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    p.add_argument("case", choices=["abc", "tank", "duct", "dam", "cantilever"])
+    p.add_argument(
+        "case", choices=["abc", "tank", "duct", "dam", "cantilever", "spheric", "figures"]
+    )
     p.add_argument("--n", type=int, nargs="*", default=None)
     p.add_argument("--reynolds", type=float, default=50.0)
     p.add_argument("--t-end", type=float, default=None)
@@ -258,6 +434,11 @@ def main():
     elif args.case == "cantilever":
         for n in args.n or [4, 6, 8]:
             cantilever(n, args.t_end or 0.55)
+    elif args.case == "spheric":
+        for n in args.n or [8]:
+            spheric(n, args.t_end or 1.5, args.wall_slip)
+    elif args.case == "figures":
+        figures()
 
 
 if __name__ == "__main__":

@@ -26,6 +26,8 @@ from sphjax.cases.fluid3d import (
     duct_poiseuille_3d,
     duct_velocity,
     hydrostatic_tank_3d,
+    spheric_dam_break_3d,
+    water_height,
 )
 from sphjax.cases.fsi import (
     dam_break_elastic_obstacle,
@@ -64,6 +66,7 @@ CASES = {
     "cantilever_3d": cantilever_3d,
     "duct_poiseuille_3d": duct_poiseuille_3d,
     "dam_break_3d": dam_break_3d,
+    "spheric_dam_break_3d": spheric_dam_break_3d,
     "hydrostatic_fsi_plate": hydrostatic_fsi_plate,
     "elastic_gate_dam_break": elastic_gate_dam_break,
     "dam_break_elastic_obstacle": dam_break_elastic_obstacle,
@@ -128,6 +131,8 @@ __all__ = [
     "duct_poiseuille_3d",
     "duct_velocity",
     "dam_break_3d",
+    "spheric_dam_break_3d",
+    "water_height",
     "hydrostatic_fsi_plate",
     "elastic_gate_dam_break",
     "dam_break_elastic_obstacle",

@@ -288,13 +288,17 @@ def _tank(
     t_end,
     info,
     fluid_height,
+    obstacle=None,
 ):
     """A tank ``[0, tank_upper]`` (2D or 3D, open at the top, gravity along the last
-    axis) of dummy walls around ``fluid``, with the hydrostatic initial density."""
+    axis) of dummy walls around ``fluid``, with the hydrostatic initial density;
+    ``obstacle`` (``[M, d]`` positions) adds wall particles inside the tank."""
     dim = fluid.shape[1]
     tank_upper = np.asarray(tank_upper, float)
     layers = wall_layers(kernel.support * h, dx)
     walls = box_walls([0.0] * dim, tank_upper, dx, layers, open_top=True)
+    if obstacle is not None:
+        walls = np.concatenate([walls, np.asarray(obstacle, float)])
     x = np.concatenate([fluid, walls])
     kind = np.concatenate([np.full(len(fluid), Kind.FLUID), np.full(len(walls), Kind.WALL)])
     # hydrostatic initial density so the column starts near equilibrium (eq. 12 inverted)
@@ -327,6 +331,54 @@ def _tank(
     )
 
 
+#: density of water (kg/m^3) in the free-surface cases
+WATER_DENSITY = 1000.0
+
+
+def _water_tank(
+    name,
+    fluid,
+    tank_upper,
+    dx,
+    gravity,
+    depth,
+    sound_speed_factor,
+    artificial_alpha,
+    density_diffusion,
+    wall_slip,
+    t_end,
+    info,
+    obstacle=None,
+):
+    """:func:`_tank` with the free-surface formulation of the tank and dam-break cases:
+    Wendland C2 with ``h = 1.5 dx``, water (``rho0 = 1000``), ``c0 = sound_speed_factor
+    sqrt(g depth)``, continuity density with ``density_diffusion`` (delta-SPH), Tait
+    ``gamma = 7``, artificial viscosity ``artificial_alpha``."""
+    return _tank(
+        name,
+        fluid,
+        tank_upper,
+        dx,
+        WendlandC2(),
+        1.5 * dx,
+        WATER_DENSITY,
+        gravity,
+        sound_speed_factor * math.sqrt(gravity * depth),
+        dict(artificial_alpha=artificial_alpha),
+        dict(
+            density="continuity",
+            gamma=7.0,
+            artificial_viscosity=True,
+            density_diffusion=density_diffusion,
+        ),
+        wall_slip,
+        t_end,
+        info,
+        depth,
+        obstacle,
+    )
+
+
 def hydrostatic_tank(
     n: int = 20,
     height: float = 1.0,
@@ -350,32 +402,21 @@ def hydrostatic_tank(
     g = check_positive("gravity", gravity)
     dx = H / n
     W = dx * round(W / dx)
-    kernel, h = WendlandC2(), 1.5 * dx
-    rho0 = 1000.0
-    c0 = sound_speed_factor * math.sqrt(g * H)
     fluid = lattice([0.0, 0.0], [W, H], dx)
-    info = dict(dx=dx, n=n, height=H, width=W, gravity=g, bottom_pressure=rho0 * g * H)
-    return _tank(
+    info = dict(dx=dx, n=n, height=H, width=W, gravity=g, bottom_pressure=WATER_DENSITY * g * H)
+    return _water_tank(
         "hydrostatic_tank",
         fluid,
         (W, 1.2 * H),
         dx,
-        kernel,
-        h,
-        rho0,
         g,
-        c0,
-        dict(artificial_alpha=artificial_alpha),
-        dict(
-            density="continuity",
-            gamma=7.0,
-            artificial_viscosity=True,
-            density_diffusion=density_diffusion,
-        ),
+        H,
+        sound_speed_factor,
+        artificial_alpha,
+        density_diffusion,
         "no_slip",
         t_end,
         info,
-        H,
     )
 
 
@@ -416,9 +457,6 @@ def dam_break(
         H = 2.0 * L
     else:
         H = dx * max(1, round(check_positive("column_height", column_height) / dx))
-    kernel, h = WendlandC2(), 1.5 * dx
-    rho0 = 1000.0
-    c0 = sound_speed_factor * math.sqrt(g * H)
     tank_length = dx * round(tank_length_factor * L / dx)
     fluid = lattice([0.0, 0.0], [L, H], dx)
     if t_end is None:
@@ -432,27 +470,19 @@ def dam_break(
         gravity=g,
         time_scale=1.0 / math.sqrt(2 * g / L),
     )
-    return _tank(
+    return _water_tank(
         "dam_break",
         fluid,
         (tank_length, 1.25 * max(H, L)),
         dx,
-        kernel,
-        h,
-        rho0,
         g,
-        c0,
-        dict(artificial_alpha=artificial_alpha),
-        dict(
-            density="continuity",
-            gamma=7.0,
-            artificial_viscosity=True,
-            density_diffusion=density_diffusion,
-        ),
+        H,
+        sound_speed_factor,
+        artificial_alpha,
+        density_diffusion,
         wall_slip,
         t_end,
         info,
-        H,
     )
 
 

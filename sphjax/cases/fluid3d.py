@@ -5,6 +5,8 @@
 * :func:`hydrostatic_tank_3d` — a water column at rest in a box, ``p = rho0 g (H - z)``;
 * :func:`dam_break_3d` — the Martin & Moyce (1952) dam break with the column across the
   whole width of a box tank;
+* :func:`spheric_dam_break_3d` — SPHERIC benchmark 2 (Kleefsman et al. 2005): a dam break
+  onto a box obstacle, with the experiment's water-height gauges (:func:`water_height`);
 * :func:`duct_poiseuille_3d` — body-force-driven flow in a square or rectangular duct with
   four no-slip walls, periodic along the flow (White's series, :func:`duct_velocity`).
 
@@ -22,9 +24,10 @@ import numpy as np
 from sphjax.cases._geometry import check_positive, check_resolution, lattice, wall_layers
 from sphjax.cases._packing import periodic_neighbours, relax_periodic, summation_masses
 from sphjax.cases._systems import fluid_system, wall_system
-from sphjax.cases.fluid import _finish, _relax_iterations, _tank
+from sphjax.cases.fluid import WATER_DENSITY, _finish, _relax_iterations, _water_tank
+from sphjax.core import kernels
 from sphjax.core.case import Case
-from sphjax.core.kernels import WendlandC2, as_kernel
+from sphjax.core.kernels import as_kernel
 from sphjax.core.model import Domain, Model
 from sphjax.core.params import make_params
 from sphjax.core.state import Kind, make_state
@@ -222,32 +225,23 @@ def hydrostatic_tank_3d(
     g = check_positive("gravity", gravity)
     dx = H / n
     W, D = dx * max(1, round(W / dx)), dx * max(1, round(D / dx))
-    kernel, h = WendlandC2(), 1.5 * dx
-    rho0 = 1000.0
-    c0 = sound_speed_factor * math.sqrt(g * H)
     fluid = lattice([0.0, 0.0, 0.0], [W, D, H], dx)
-    info = dict(dx=dx, n=n, height=H, width=W, depth=D, gravity=g, bottom_pressure=rho0 * g * H)
-    return _tank(
+    info = dict(
+        dx=dx, n=n, height=H, width=W, depth=D, gravity=g, bottom_pressure=WATER_DENSITY * g * H
+    )
+    return _water_tank(
         "hydrostatic_tank_3d",
         fluid,
         (W, D, 1.2 * H),
         dx,
-        kernel,
-        h,
-        rho0,
         g,
-        c0,
-        dict(artificial_alpha=artificial_alpha),
-        dict(
-            density="continuity",
-            gamma=7.0,
-            artificial_viscosity=True,
-            density_diffusion="molteni",
-        ),
+        H,
+        sound_speed_factor,
+        artificial_alpha,
+        "molteni",
         "no_slip",
         t_end,
         info,
-        H,
     )
 
 
@@ -284,9 +278,6 @@ def dam_break_3d(
     Wy = L if tank_width is None else check_positive("tank_width", tank_width)
     Wy = dx * max(1, round(Wy / dx))
     H = 2.0 * L
-    kernel, h = WendlandC2(), 1.5 * dx
-    rho0 = 1000.0
-    c0 = sound_speed_factor * math.sqrt(g * H)
     tank_length = dx * round(tank_length_factor * L / dx)
     fluid = lattice([0.0, 0.0, 0.0], [L, Wy, H], dx)
     if t_end is None:
@@ -301,28 +292,138 @@ def dam_break_3d(
         gravity=g,
         time_scale=1.0 / math.sqrt(2 * g / L),
     )
-    return _tank(
+    return _water_tank(
         "dam_break_3d",
         fluid,
         (tank_length, Wy, 1.25 * H),
         dx,
-        kernel,
-        h,
-        rho0,
         g,
-        c0,
-        dict(artificial_alpha=artificial_alpha),
-        dict(
-            density="continuity",
-            gamma=7.0,
-            artificial_viscosity=True,
-            density_diffusion=density_diffusion,
-        ),
+        H,
+        sound_speed_factor,
+        artificial_alpha,
+        density_diffusion,
         wall_slip,
         t_end,
         info,
-        H,
     )
+
+
+#: SPHERIC benchmark 2 (Kleefsman et al. 2005, J. Comput. Phys. 206, 363-393; SPHERIC
+#: test-case 2 description): tank, water column, box obstacle (m), with x from the wall
+#: the box faces (the column stands against the opposite wall) and z up.
+SPHERIC_TANK = (3.22, 1.0, 1.0)
+SPHERIC_COLUMN = (1.228, 0.55)  # length along x, height (across the full width)
+SPHERIC_BOX = ((0.6635, 0.2985, 0.0), (0.8245, 0.7015, 0.161))  # 0.161 x 0.403 x 0.161
+#: water-height gauges (x, y): H1 behind the box, H2 and H3 between it and the column,
+#: H4 in the reservoir
+SPHERIC_GAUGES = {
+    "H1": (0.496, 0.5),
+    "H2": (0.992, 0.5),
+    "H3": (1.488, 0.5),
+    "H4": (2.638, 0.5),
+}
+#: pressure sensors: P1-P4 up the box's face towards the column, P5-P8 along its top
+SPHERIC_SENSORS = {
+    "P1": (0.8245, 0.5, 0.021),
+    "P2": (0.8245, 0.5, 0.061),
+    "P3": (0.8245, 0.5, 0.101),
+    "P4": (0.8245, 0.5, 0.141),
+    "P5": (0.8035, 0.5, 0.161),
+    "P6": (0.7635, 0.5, 0.161),
+    "P7": (0.7235, 0.5, 0.161),
+    "P8": (0.6835, 0.5, 0.161),
+}
+
+
+def spheric_dam_break_3d(
+    n: int = 10,
+    gravity: float = 9.81,
+    sound_speed_factor: float = 20.0,
+    artificial_alpha: float = 0.1,
+    density_diffusion: str | None = "molteni",
+    wall_slip: str = "no_slip",
+    t_end: float = 6.0,
+) -> Case:
+    """SPHERIC benchmark 2: a dam break onto a box obstacle (Kleefsman et al. 2005).
+
+    A tank ``3.22 x 1 x 1`` m; a water column ``1.228`` m long and ``0.55`` m high across
+    the full width against the wall ``x = 3.22``; a box ``0.161 x 0.403 x 0.161`` m on the
+    floor, its faces at ``x = 0.6635`` and ``0.8245``, centred across the width.  The
+    experiment (MARIN) measured the water height at four gauges (``info["gauges"]``,
+    :func:`water_height`) and the pressure at eight sensors on the box
+    (``info["sensors"]``, :func:`sphjax.observables.probe_pressure`).
+
+    The formulation is :func:`dam_break_3d`'s: Wendland C2 with ``h = 1.5 dx``,
+    continuity density with delta-SPH, Tait ``gamma = 7``, artificial viscosity,
+    ``c0 = 20 sqrt(g H)`` with ``H`` the column height, dummy walls (Adami et al. 2012)
+    for the tank and the box.  The box is the lattice points inside it, so its faces
+    sit within ``dx / 2`` of the true ones; the tank and column are rounded to whole
+    spacings.
+
+    Args:
+      n: particles over the column's height (``dx = 0.55 / n``); the box is ``0.161``
+        high, about ``0.3 n`` spacings.
+    """
+    n = check_resolution("n", n, 4)
+    g = check_positive("gravity", gravity)
+    length, width, height = SPHERIC_TANK
+    column_length, column_height = SPHERIC_COLUMN
+    dx = column_height / n
+    L, W, Ht = (dx * max(1, round(v / dx)) for v in (length, width, height))
+    Lc = dx * max(1, round(column_length / dx))
+    fluid = lattice([L - Lc, 0.0, 0.0], [L, W, column_height], dx)
+    # the box: the tank lattice's points inside it, as wall particles
+    lo, hi = (np.asarray(c) for c in SPHERIC_BOX)
+    grid = lattice([0.0, 0.0, 0.0], [L, W, hi[2] + dx], dx)
+    box = grid[np.all((grid > lo) & (grid < hi), axis=1)]
+    info = dict(
+        dx=dx,
+        n=n,
+        tank=(L, W, Ht),
+        column_length=Lc,
+        column_height=column_height,
+        box=(tuple(map(float, lo)), tuple(map(float, hi))),
+        box_particles=len(box),
+        gravity=g,
+        gauges=dict(SPHERIC_GAUGES),
+        sensors=dict(SPHERIC_SENSORS),
+    )
+    return _water_tank(
+        "spheric_dam_break_3d",
+        fluid,
+        (L, W, Ht),
+        dx,
+        g,
+        column_height,
+        sound_speed_factor,
+        artificial_alpha,
+        density_diffusion,
+        wall_slip,
+        t_end,
+        info,
+        obstacle=box,
+    )
+
+
+def water_height(states, case: Case, gauge):
+    """Depth of water over the floor at ``gauge = (x, y)``: the fluid volume per unit
+    floor area there, ``sum_f V_f W2(|(x_f, y_f) - gauge|, h)`` with ``V_f = m_f / rho_f``
+    and ``W2`` the case's kernel in two dimensions (its 2D normalisation), so a column
+    of depth ``d`` without gaps reads ``d``; spray above the column adds its volume.
+
+    Args:
+      states: a State or a Trajectory's ``states``, with or without a leading time axis.
+      gauge: the ``(x, y)`` position, e.g. ``case.info["gauges"]["H2"]``.
+    Returns:
+      the depth, ``[T]`` or a scalar (jax.numpy, differentiable).
+    """
+    states = getattr(states, "states", states)
+    model = case.model
+    gauge = jnp.asarray(gauge, states.position.dtype)
+    r = jnp.linalg.norm(states.position[..., :2] - gauge, axis=-1)
+    weight = kernels.W(model.kernel, r, model.smoothing_length, 2)
+    fluid = (states.kind == Kind.FLUID) & (r < model.cutoff)
+    return jnp.sum(jnp.where(fluid, weight * states.mass / states.density, 0.0), axis=-1)
 
 
 def duct_velocity(y, z, half_width, half_height, viscosity, body_force, t=None, terms=100):
@@ -450,4 +551,6 @@ __all__ = [
     "duct_poiseuille_3d",
     "duct_velocity",
     "dam_break_3d",
+    "spheric_dam_break_3d",
+    "water_height",
 ]

@@ -157,6 +157,46 @@ def _finish(name, x, velocity, kind, dx, rho, model, params, t_end, info, cfl, v
     )
 
 
+def _beam_arguments(n, length, thickness, young_modulus, density, amplitude, clamp_length):
+    """The checked arguments of a clamped beam (plate or cantilever): ``n``, ``L``, ``H``,
+    ``E``, ``rho``, ``dx = H / n``, particles along the beam and along the clamp."""
+    n = check_resolution("n", n, 2)
+    L = check_positive("length", length)
+    H = check_positive("thickness", thickness)
+    E = check_positive("young_modulus", young_modulus)
+    rho = check_positive("density", density)
+    if not amplitude >= 0:
+        raise ValueError(f"amplitude (V_f) must be >= 0, got {amplitude}")
+    if not clamp_length >= 0:
+        raise ValueError(f"clamp_length must be >= 0, got {clamp_length}")
+    dx = H / n
+    return n, L, H, E, rho, dx, int(round(L / dx)), int(round(clamp_length / dx))
+
+
+def _first_mode_velocity(x, kind, amplitude, length):
+    """``params -> v``: ``v_y(x) = V_f c0 f(x / L)`` on the beam (:func:`plate_mode_shape`,
+    ``c0`` of the parameters), 0 on the clamp."""
+    solid = kind == Kind.SOLID
+    profile = np.zeros_like(x)
+    profile[solid, 1] = amplitude * plate_mode_shape(x[solid, 0] / length)
+
+    def velocity_fn(p):
+        return plate_sound_speed(p) * jnp.asarray(profile)
+
+    return velocity_fn
+
+
+def _beam_params(dim, E, poisson_ratio, rho, penalty_alpha):
+    """The elastic Params of a beam (no fluid, no gravity)."""
+    return make_params(
+        dim,
+        young_modulus=E,
+        poisson_ratio=poisson_ratio,
+        solid_density=rho,
+        penalty_alpha=0.0 if penalty_alpha is None else penalty_alpha,
+    )
+
+
 def oscillating_plate(
     n: int = 12,
     amplitude: float = 0.001,
@@ -197,18 +237,9 @@ def oscillating_plate(
       penalty_alpha: ``None`` (no penalty force) or Ganzenmüller's ``alpha``.
       cfl: solid Courant number of the time step.
     """
-    n = check_resolution("n", n, 2)
-    L = check_positive("length", length)
-    H = check_positive("thickness", thickness)
-    E = check_positive("young_modulus", young_modulus)
-    rho = check_positive("density", density)
-    if not amplitude >= 0:
-        raise ValueError(f"amplitude (V_f) must be >= 0, got {amplitude}")
-    if not clamp_length >= 0:
-        raise ValueError(f"clamp_length must be >= 0, got {clamp_length}")
-    dx = H / n
-    nx = int(round(L / dx))
-    n_clamp = int(round(clamp_length / dx))
+    n, L, H, E, rho, dx, nx, n_clamp = _beam_arguments(
+        n, length, thickness, young_modulus, density, amplitude, clamp_length
+    )
     x = _strip(0.0, -0.5 * H, nx, n, dx, i_start=-n_clamp)
     kind = np.where(x[:, 0] > 0.0, Kind.SOLID, Kind.CLAMPED).astype(np.int32)
     kernel = as_kernel(kernel)
@@ -216,22 +247,10 @@ def oscillating_plate(
     # clamped particles further than two kernel supports from the plate cannot act on it
     keep = x[:, 0] > -2.0 * kernel.support * h
     x, kind = x[keep], kind[keep]
-    solid = kind == Kind.SOLID
     # v_y = V_f c0 f(x / L) on the plate, 0 on the clamp; c0 follows the parameters
-    profile = np.zeros_like(x)
-    profile[solid, 1] = amplitude * plate_mode_shape(x[solid, 0] / L)
-
-    def velocity_fn(p):
-        return plate_sound_speed(p) * jnp.asarray(profile)
-
+    velocity_fn = _first_mode_velocity(x, kind, amplitude, L)
     omega = plate_angular_frequency(L, H, E, rho, poisson_ratio)
-    params = make_params(
-        2,
-        young_modulus=E,
-        poisson_ratio=poisson_ratio,
-        solid_density=rho,
-        penalty_alpha=0.0 if penalty_alpha is None else penalty_alpha,
-    )
+    params = _beam_params(2, E, poisson_ratio, rho, penalty_alpha)
     margin = L
     domain = Domain((-clamp_length - margin, -margin), (L + margin, margin), (False, False))
     model = _solid_model(kernel, h, domain, penalty_alpha is not None)

@@ -14,18 +14,19 @@ import math
 import jax.numpy as jnp
 import numpy as np
 
-from sphjax.cases._geometry import check_positive, check_resolution, lattice
+from sphjax.cases._geometry import lattice
 from sphjax.cases.solid import (
     PLATE_KL,
+    _beam_arguments,
+    _beam_params,
     _finish,
+    _first_mode_velocity,
     _solid_model,
-    plate_mode_shape,
     plate_sound_speed,
 )
 from sphjax.core.case import Case
 from sphjax.core.kernels import as_kernel
 from sphjax.core.model import Domain
-from sphjax.core.params import make_params
 from sphjax.core.state import Kind
 
 
@@ -90,18 +91,9 @@ def cantilever_3d(
       penalty_alpha: ``None`` (no penalty force) or Ganzenmüller's ``alpha``.
       cfl: solid Courant number of the time step.
     """
-    n = check_resolution("n", n, 2)
-    L = check_positive("length", length)
-    H = check_positive("thickness", thickness)
-    E = check_positive("young_modulus", young_modulus)
-    rho = check_positive("density", density)
-    if not amplitude >= 0:
-        raise ValueError(f"amplitude (V_f) must be >= 0, got {amplitude}")
-    if not clamp_length >= 0:
-        raise ValueError(f"clamp_length must be >= 0, got {clamp_length}")
-    dx = H / n
-    nx = int(round(L / dx))
-    n_clamp = int(round(clamp_length / dx))
+    n, L, H, E, rho, dx, nx, n_clamp = _beam_arguments(
+        n, length, thickness, young_modulus, density, amplitude, clamp_length
+    )
     kernel = as_kernel(kernel)
     h = h_factor * dx
     # clamped particles further than two kernel supports from the beam cannot act on it
@@ -110,20 +102,8 @@ def cantilever_3d(
     kind = np.where(x[:, 0] > 0.0, Kind.SOLID, Kind.CLAMPED).astype(np.int32)
     order = np.argsort(kind, kind="stable")  # the solid's block: solid, then clamped
     x, kind = x[order], kind[order]
-    solid = kind == Kind.SOLID
-    profile = np.zeros_like(x)
-    profile[solid, 1] = amplitude * plate_mode_shape(x[solid, 0] / L)
-
-    def velocity_fn(p):
-        return plate_sound_speed(p) * jnp.asarray(profile)
-
-    params = make_params(
-        3,
-        young_modulus=E,
-        poisson_ratio=poisson_ratio,
-        solid_density=rho,
-        penalty_alpha=0.0 if penalty_alpha is None else penalty_alpha,
-    )
+    velocity_fn = _first_mode_velocity(x, kind, amplitude, L)
+    params = _beam_params(3, E, poisson_ratio, rho, penalty_alpha)
     margin = L
     domain = Domain(
         (-clamp_length - margin, -margin, -margin), (L + margin, margin, margin), (False,) * 3

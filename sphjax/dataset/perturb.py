@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import dataclasses
 import inspect
+import itertools
 from collections.abc import Mapping
 
 import jax
@@ -31,10 +32,11 @@ class Perturbation:
     """Seeded random change of a case's initial state (fluid particles only).
 
     ``v = s v_case + v_random`` with ``s`` uniform in ``amplitude`` and ``v_random`` a
-    divergence-free 2D field from a random stream function ``psi`` built of Fourier modes
-    with wavenumbers up to ``modes`` (periodic axes: ``cos(2 pi k x / L + phase)``;
-    closed axes: ``sin(pi k x / L)``, so no flow crosses the walls), scaled so its
-    largest speed is ``fourier`` times the largest speed of the case (or 1 if at rest).
+    divergence-free field (2D: from a random stream function ``psi``; 3D: the curl of a
+    random vector potential) built of Fourier modes with wavenumbers up to ``modes``
+    (periodic axes: ``cos(2 pi k x / L + phase)``; closed axes: ``sin(pi k x / L)``, so
+    no flow crosses the walls), scaled so its largest speed is ``fourier`` times the
+    largest speed of the case (or 1 if at rest).
 
     Attributes:
       amplitude: ``(lo, hi)`` range of the scale ``s`` of the case velocity field.
@@ -73,11 +75,58 @@ def trajectory_rng(seed: int, split: str, index: int) -> np.random.Generator:
     return np.random.default_rng([int(seed), SPLITS.index(split), int(index)])
 
 
+def _axis_factor(s, axis, k, size, periodic, rng):
+    """One axis's factor of a Fourier mode and its derivative: ``cos(2 pi k s + phase)``
+    on a periodic axis (a random phase drawn from ``rng``), ``sin(pi k s)`` on a closed
+    one (zero on both walls)."""
+    if periodic:
+        phase = rng.uniform(0, 2 * np.pi)
+        arg = 2 * np.pi * k * s[:, axis] + phase
+        return np.cos(arg), -2 * np.pi * k / size[axis] * np.sin(arg)
+    arg = np.pi * k * s[:, axis]
+    return np.sin(arg), np.pi * k / size[axis] * np.cos(arg)
+
+
+def _random_velocity_field_3d(x, domain, rng, modes):
+    """``u = curl A``: each component ``A_c`` of the vector potential is a sum of Fourier
+    modes (:func:`_axis_factor` on every axis) with amplitudes ``N(0, 1) / |k|^2``.  A
+    curl is divergence-free, and ``A_c`` vanishes on the walls of every closed axis, so
+    its tangential derivatives do too: no flow through a wall."""
+    lower, size = np.asarray(domain.lower), np.asarray(domain.size)
+    s = (x - lower) / size  # in [0, 1) per axis
+    u = np.zeros_like(x)
+    axes_k = [range(0, modes + 1) if p else range(1, modes + 1) for p in domain.periodic]
+    for c in range(3):
+        for k in itertools.product(*axes_k):
+            if not any(k):
+                continue
+            amp = rng.normal() / sum(ki * ki for ki in k)
+            f, df = zip(
+                *(_axis_factor(s, a, k[a], size, domain.periodic[a], rng) for a in range(3)),
+                strict=True,
+            )
+            # d A_c / d x_a for the two axes a != c; u_i = eps_ijc d A_c / d x_j
+            i, j = (c + 1) % 3, (c + 2) % 3
+            grad_j = amp * df[j] * f[i] * f[c]
+            grad_i = amp * df[i] * f[j] * f[c]
+            u[:, i] += grad_j
+            u[:, j] -= grad_i
+    return u
+
+
 def random_velocity_field(position, domain, rng, modes: int = 2) -> np.ndarray:
-    """Divergence-free 2D velocity ``(d psi/dy, -d psi/dx)`` at ``position``, max speed 1."""
+    """Divergence-free velocity at ``position``, largest speed 1.
+
+    In 2D ``(d psi/dy, -d psi/dx)`` of a random stream function ``psi``; in 3D the curl of
+    a random vector potential (:func:`_random_velocity_field_3d`).  On periodic axes the
+    modes are ``cos(2 pi k x / L + phase)``, on closed axes ``sin(pi k x / L)``, so no
+    flow crosses a wall.
+    """
     x = np.asarray(position, np.float64)
-    if x.shape[1] != 2:
-        raise ValueError("the random Fourier velocity field is 2D only; use fourier=0 in 3D")
+    if x.shape[1] == 3:
+        u = _random_velocity_field_3d(x, domain, rng, modes)
+        peak = np.linalg.norm(u, axis=1).max()
+        return u / peak if peak > 0 else u
     lower, size = np.asarray(domain.lower), np.asarray(domain.size)
     s = (x - lower) / size  # in [0, 1) per axis
     u = np.zeros_like(x)
