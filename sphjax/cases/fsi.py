@@ -147,15 +147,23 @@ def _check_substeps(substeps):
     )
 
 
-def _finish(name, model, params, initial_state, t_end, info, cfl, substeps=1):
+#: with ``substeps="auto"``, at least this many steps per period of the solid's first mode
+STEPS_PER_PERIOD = 20
+
+
+def _finish(name, model, params, initial_state, t_end, info, cfl, substeps=1, period=None):
     """The Case with its stable step.  ``substeps`` (split integration,
     ``SolidSystem.substeps``): ``"auto"`` is the whole number of the solid's stable steps
-    in the fluid's."""
+    in the fluid's, or in ``period / STEPS_PER_PERIOD`` if that is shorter: the fluid's
+    force on the solid is sampled once a step, so a step must resolve the solid's motion
+    (a plate sampled a few times a period oscillates about the wrong deflection)."""
     state = initial_state(params)
     if substeps == "auto":
         dt_solid = stable_time_step(state, model, params, solid_cfl=cfl)
-        dt_fluid = stable_time_step(state, model.replace(systems=model.systems[:-1]), params)
-        substeps = max(1, int(dt_fluid / dt_solid))
+        dt = stable_time_step(state, model.replace(systems=model.systems[:-1]), params)
+        if period is not None:
+            dt = min(dt, period / STEPS_PER_PERIOD)
+        substeps = max(1, int(dt / dt_solid))
     solid = model.system(SolidSystem).replace(substeps=_check_substeps(substeps))
     model = model.replace(systems=model.systems[:-1] + (solid,))
     info = {**info, "substeps": substeps}
@@ -210,7 +218,8 @@ def hydrostatic_fsi_plate(
       t_end: default ``20`` periods of the plate's first dry bending mode.
       substeps: split integration (``SolidSystem.substeps``): the plate takes this many
         steps of its own per step, the step ``substeps`` times the solid's stable one (up
-        to the fluid's); ``"auto"``: as many as fit in the fluid's stable step.
+        to the fluid's); ``"auto"``: as many as fit in the fluid's stable step and in
+        1/20 of the dry first-mode period.
     """
     n = check_resolution("n", n, 2)
     L = check_positive("length", length)
@@ -267,9 +276,9 @@ def hydrostatic_fsi_plate(
         n_solid=len(plate),
         n_clamped=len(clamped),
     )
-    return _finish(
-        "hydrostatic_fsi_plate", model, params, initial_state, t_end, info, cfl, substeps
-    )
+    period = info["dry_period"]
+    args = (model, params, initial_state, t_end, info, cfl, substeps, period)
+    return _finish("hydrostatic_fsi_plate", *args)
 
 
 def elastic_gate_dam_break(
