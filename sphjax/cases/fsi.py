@@ -19,7 +19,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from sphjax.cases._geometry import check_positive, check_resolution, lattice, wall_layers
-from sphjax.cases._systems import fluid_system, wall_system
+from sphjax.cases._systems import finish_case, fluid_system, wall_system
 from sphjax.core.case import Case
 from sphjax.core.kernels import as_kernel
 from sphjax.core.model import Domain, Model
@@ -168,16 +168,7 @@ def _finish(name, model, params, initial_state, t_end, info, cfl, substeps=1, pe
     model = model.replace(systems=model.systems[:-1] + (solid,))
     info = {**info, "substeps": substeps}
     dt = stable_time_step(state, model, params, solid_cfl=cfl)
-    return Case(
-        name=name,
-        state=state,
-        model=model,
-        params=params,
-        dt=dt,
-        t_end=t_end,
-        info=info,
-        initial_state=initial_state,
-    )
+    return finish_case(name, state, model, params, t_end, info, dt, initial_state)
 
 
 def hydrostatic_fsi_plate(
