@@ -32,6 +32,7 @@ from sphjax.core.kernels import WendlandC2
 from sphjax.core.model import Domain, Model
 from sphjax.core.params import make_params
 from sphjax.core.state import make_state
+from sphjax.integration.timestep import check_time_step
 
 
 def fsi_box(n=10, no_slip=True, acceleration=False, density="continuity", seed=0, substeps=1):
@@ -287,3 +288,25 @@ def test_plate_carries_the_column():
     # static deflection within 1 % (measured 0.08 %)
     assert split.info["substeps"] > 5
     assert abs(static(split) / coupled - 1.0) < 0.01
+
+
+def test_split_integration_options():
+    """``substeps``: bad values get one clear line; ``"auto"`` fits a whole number of plate
+    steps in the step, which the step check accepts and a larger step fails; the diffrax
+    driver refuses a split model rather than run it unsplit."""
+    with pytest.raises(ValueError, match="SolidSystem.substeps must be a positive integer"):
+        sphjax.SolidSystem(substeps=0)
+    small = dict(n=2, length=0.3, depth=0.1)
+    with pytest.raises(ValueError, match="substeps must be a positive integer or 'auto'"):
+        hydrostatic_fsi_plate(**small, substeps="fast")
+    unsplit, split = hydrostatic_fsi_plate(**small), hydrostatic_fsi_plate(**small, substeps="auto")
+    k = split.info["substeps"]
+    # the tiny plate's dry period (1.3 ms, 20 steps) caps the step below the fluid's
+    assert k == int(split.info["dry_period"] / 20 / unsplit.dt) == 6
+    assert split.model.system(sphjax.SolidSystem).substeps == k
+    assert split.dt == pytest.approx(k * unsplit.dt, rel=1e-12)
+    check_time_step(split.dt, split.state, split.model, split.params)
+    with pytest.raises(ValueError, match="exceeds the stability limit"):
+        check_time_step(2.5 * split.dt, split.state, split.model, split.params)
+    with pytest.raises(ValueError, match="split integration runs in sphjax.simulate only"):
+        sphjax.diffeqsolve_case(split, t1=split.dt)
