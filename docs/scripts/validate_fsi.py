@@ -104,6 +104,7 @@ def main(argv=None):
             with open(args.out, "a") as f:
                 f.write(json.dumps(row) + "\n")
         if args.dry_only:
+            print(json.dumps(row, default=str)[:400], flush=True)
             with open(args.out, "a") as f:
                 f.write(json.dumps(row) + "\n")
 
