@@ -24,8 +24,11 @@ resolved with its own stable step.
 
 Cost of a step: one evaluation of every system plus ``k + 1`` of the solid alone, in
 place of ``k`` evaluations of everything at the solid's step.  The inner steps are a
-``lax.scan`` (each inner step rematerialised in reverse mode, so a step's transpose holds
-``k`` solid states), differentiable in forward and reverse mode.
+``lax.scan``, differentiable in forward and reverse mode; in reverse mode the step is
+rematerialised as a whole (with ``simulate``'s step checkpoint) and its transpose keeps the
+inner steps' per-particle residuals, ``k`` solid states' worth: checkpointing each inner
+step as well made the gradient 2x slower (a third replay of the inner steps) for no
+measurable memory (the 3,838-particle plate, 126 inner steps: 37.2 against 38.1 MB).
 """
 
 from __future__ import annotations
@@ -107,7 +110,6 @@ def kick_drift_kick(state: State, neighbors, dt, model, params):
     inner = coupling_kick(inner, solid.acceleration - inner.acceleration)
     h = dt / system.substeps
 
-    @jax.checkpoint
     def substep(solid, _):
         return kdk.closing_kick(with_fast(kdk.kick_drift(solid, h, model)), h), None
 
