@@ -1,7 +1,10 @@
-"""Systems from the case factories' plain arguments (strings and flags)."""
+"""Systems from the case factories' plain arguments (strings and flags), and the Case
+they end with."""
 
 from __future__ import annotations
 
+from sphjax.core.case import Case
+from sphjax.integration.timestep import stable_time_step
 from sphjax.physics.boundary.system import WallSystem
 from sphjax.physics.boundary.wall import AdamiBoundary
 from sphjax.physics.fluid.density import ContinuityDensity, SummationDensity
@@ -55,3 +58,18 @@ def wall_system(wall_slip: str = "no_slip") -> WallSystem:
     if wall_slip not in SLIPS:
         raise ValueError(f"wall_slip must be 'no_slip' or 'free_slip', got {wall_slip!r}")
     return WallSystem(AdamiBoundary(no_slip=wall_slip == "no_slip"))
+
+
+def finish_case(name, state, model, params, t_end, info, dt=None, initial_state=None) -> Case:
+    """The factories' Case, with the stable time step unless ``dt`` is given."""
+    dt = stable_time_step(state, model, params) if dt is None else dt
+    return Case(
+        name=name,
+        state=state,
+        model=model,
+        params=params,
+        dt=dt,
+        t_end=t_end,
+        info=info,
+        initial_state=initial_state,
+    )

@@ -9,28 +9,14 @@ import numpy as np
 
 from sphjax.cases._geometry import box_walls, check_positive, check_resolution, lattice, wall_layers
 from sphjax.cases._packing import periodic_neighbours, relax_periodic, summation_masses
+from sphjax.cases._systems import finish_case as _finish
 from sphjax.cases._systems import fluid_system, wall_system
 from sphjax.core.case import Case
 from sphjax.core.kernels import QuinticSpline, WendlandC2, as_kernel
 from sphjax.core.model import Domain, Model
 from sphjax.core.params import make_params
 from sphjax.core.state import Kind, make_state
-from sphjax.integration.timestep import stable_time_step
 from sphjax.physics.fluid.eos import tait_density
-
-
-def _finish(name, state, model, params, t_end, info, dt=None, initial_state=None):
-    dt = stable_time_step(state, model, params) if dt is None else dt
-    return Case(
-        name=name,
-        state=state,
-        model=model,
-        params=params,
-        dt=dt,
-        t_end=t_end,
-        info=info,
-        initial_state=initial_state,
-    )
 
 
 def _relax_iterations(value) -> int:

@@ -19,7 +19,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from sphjax.cases._geometry import check_positive, check_resolution, lattice, wall_layers
-from sphjax.cases._systems import fluid_system, wall_system
+from sphjax.cases._systems import finish_case, fluid_system, wall_system
 from sphjax.core.case import Case
 from sphjax.core.kernels import as_kernel
 from sphjax.core.model import Domain, Model
@@ -139,19 +139,36 @@ def _coupled_params(g, rho_f, c0, artificial_alpha, E, poisson_ratio, rho_s):
     )
 
 
-def _finish(name, model, params, initial_state, t_end, info, cfl):
-    state = initial_state(params)
-    dt = stable_time_step(state, model, params, solid_cfl=cfl)
-    return Case(
-        name=name,
-        state=state,
-        model=model,
-        params=params,
-        dt=dt,
-        t_end=t_end,
-        info=info,
-        initial_state=initial_state,
+def _check_substeps(substeps):
+    if substeps == "auto" or (isinstance(substeps, int) and substeps >= 1):
+        return substeps
+    raise ValueError(
+        f"substeps must be a positive integer or 'auto' (split integration), got {substeps!r}"
     )
+
+
+#: with ``substeps="auto"``, at least this many steps per period of the solid's first mode
+STEPS_PER_PERIOD = 20
+
+
+def _finish(name, model, params, initial_state, t_end, info, cfl, substeps=1, period=None):
+    """The Case with its stable step.  ``substeps`` (split integration,
+    ``SolidSystem.substeps``): ``"auto"`` is the whole number of the solid's stable steps
+    in the fluid's, or in ``period / STEPS_PER_PERIOD`` if that is shorter: the fluid's
+    force on the solid is sampled once a step, so a step must resolve the solid's motion
+    (a plate sampled a few times a period oscillates about the wrong deflection)."""
+    state = initial_state(params)
+    if substeps == "auto":
+        dt_solid = stable_time_step(state, model, params, solid_cfl=cfl)
+        dt = stable_time_step(state, model.replace(systems=model.systems[:-1]), params)
+        if period is not None:
+            dt = min(dt, period / STEPS_PER_PERIOD)
+        substeps = max(1, int(dt / dt_solid))
+    solid = model.system(SolidSystem).replace(substeps=_check_substeps(substeps))
+    model = model.replace(systems=model.systems[:-1] + (solid,))
+    info = {**info, "substeps": substeps}
+    dt = stable_time_step(state, model, params, solid_cfl=cfl)
+    return finish_case(name, state, model, params, t_end, info, dt, initial_state)
 
 
 def hydrostatic_fsi_plate(
@@ -170,6 +187,7 @@ def hydrostatic_fsi_plate(
     h_factor: float = 1.2,
     cfl: float = 0.5,
     t_end: float | None = None,
+    substeps: int | str = 1,
 ) -> Case:
     """A water column of depth ``H`` resting on an elastic plate clamped at both ends
     (Fourey et al. 2017; O'Connor & Rogers 2021), plane strain.
@@ -189,6 +207,10 @@ def hydrostatic_fsi_plate(
       kernel, h_factor: kernel name and ``h = h_factor dx`` for fluid and solid.
       cfl: solid Courant number of the time step (the solid's sound speed sets it).
       t_end: default ``20`` periods of the plate's first dry bending mode.
+      substeps: split integration (``SolidSystem.substeps``): the plate takes this many
+        steps of its own per step, the step ``substeps`` times the solid's stable one (up
+        to the fluid's); ``"auto"``: as many as fit in the fluid's stable step and in
+        1/20 of the dry first-mode period.
     """
     n = check_resolution("n", n, 2)
     L = check_positive("length", length)
@@ -245,7 +267,9 @@ def hydrostatic_fsi_plate(
         n_solid=len(plate),
         n_clamped=len(clamped),
     )
-    return _finish("hydrostatic_fsi_plate", model, params, initial_state, t_end, info, cfl)
+    period = info["dry_period"]
+    args = (model, params, initial_state, t_end, info, cfl, substeps, period)
+    return _finish("hydrostatic_fsi_plate", *args)
 
 
 def elastic_gate_dam_break(
@@ -266,6 +290,7 @@ def elastic_gate_dam_break(
     h_factor: float = 1.5,
     cfl: float = 0.5,
     t_end: float = 0.4,
+    substeps: int | str = 1,
 ) -> Case:
     """Dam break through an elastic gate (Antoci, Gallati & Sibilla 2007), plane strain.
 
@@ -281,6 +306,7 @@ def elastic_gate_dam_break(
 
     Args:
       n: particles across the gate thickness (``dx = thickness / n``).
+      substeps: split integration, as in :func:`hydrostatic_fsi_plate`.
     """
     n = check_resolution("n", n, 2)
     W = check_positive("column_width", column_width)
@@ -344,7 +370,9 @@ def elastic_gate_dam_break(
         n_clamped=len(clamped),
         experiment_peak_ux=0.04,
     )
-    return _finish("elastic_gate_dam_break", model, params, initial_state, t_end, info, cfl)
+    return _finish(
+        "elastic_gate_dam_break", model, params, initial_state, t_end, info, cfl, substeps
+    )
 
 
 def dam_break_elastic_obstacle(
@@ -363,6 +391,7 @@ def dam_break_elastic_obstacle(
     h_factor: float = 1.5,
     cfl: float = 0.5,
     t_end: float = 1.0,
+    substeps: int | str = 1,
 ) -> Case:
     """A dam break hitting an elastic plate fixed to the floor (Zhan et al. 2019, section
     6.5; TrixiParticles' ``dam_break_plate_2d``), plane strain.
@@ -375,6 +404,7 @@ def dam_break_elastic_obstacle(
 
     Args:
       n: particles across the plate thickness (``dx = thickness / n``).
+      substeps: split integration, as in :func:`hydrostatic_fsi_plate`.
     """
     n = check_resolution("n", n, 2)
     L = check_positive("column_width", column_width)
@@ -435,7 +465,9 @@ def dam_break_elastic_obstacle(
         n_solid=len(plate),
         n_clamped=len(clamped),
     )
-    return _finish("dam_break_elastic_obstacle", model, params, initial_state, t_end, info, cfl)
+    return _finish(
+        "dam_break_elastic_obstacle", model, params, initial_state, t_end, info, cfl, substeps
+    )
 
 
 __all__ = [

@@ -22,6 +22,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from sphjax.cases._geometry import check_positive, check_resolution
+from sphjax.cases._systems import finish_case
 from sphjax.core.case import Case
 from sphjax.core.kernels import as_kernel
 from sphjax.core.model import Domain, Model
@@ -145,16 +146,7 @@ def _finish(name, x, velocity, kind, dx, rho, model, params, t_end, info, cfl, v
         n_solid=int(np.sum(kind == Kind.SOLID)),
         n_clamped=int(np.sum(kind == Kind.CLAMPED)),
     )
-    return Case(
-        name=name,
-        state=state,
-        model=model,
-        params=params,
-        dt=dt,
-        t_end=t_end,
-        info=info,
-        initial_state=initial_state,
-    )
+    return finish_case(name, state, model, params, t_end, info, dt, initial_state)
 
 
 def _beam_arguments(n, length, thickness, young_modulus, density, amplitude, clamp_length):

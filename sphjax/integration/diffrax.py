@@ -37,6 +37,7 @@ from sphjax.integration._kdk import KickDriftKick
 from sphjax.integration._term import Phase, Rates, SPHArgs, SPHTerm
 from sphjax.integration.simulate import _is_traced
 from sphjax.physics.rhs import build_neighbors
+from sphjax.physics.solid.system import SolidSystem
 
 
 def phase_of(state: State) -> Phase:
@@ -96,6 +97,12 @@ def diffeqsolve_case(
     """
     dt = case.dt if dt is None else dt
     t1 = case.t_end if t1 is None else t1
+    solid = case.model.system(SolidSystem)
+    if solid is not None and solid.substeps > 1:
+        raise ValueError(
+            f"SolidSystem.substeps={solid.substeps}: split integration runs in sphjax.simulate "
+            "only; use simulate, or set substeps=1 (and the solid's time step) for diffrax"
+        )
     if not _is_traced(dt, t1):
         if not float(dt) > 0:
             raise ValueError(f"dt must be positive, got {dt}")

@@ -27,6 +27,7 @@ from sphjax.core.model import Model
 from sphjax.core.neighbors import capacity
 from sphjax.core.params import Params
 from sphjax.core.state import State, Trajectory
+from sphjax.integration import split
 from sphjax.integration import step as kdk
 from sphjax.integration.timestep import check_time_step
 from sphjax.physics.rhs import (
@@ -64,8 +65,11 @@ def kick_drift_kick(state: State, neighbors: Neighbors, dt, model: Model, params
     """Advance one step of size ``dt`` with neighbour lists; returns ``(state, neighbors)``.
 
     :func:`sphjax.integration.step.kick_drift_kick` with the right-hand side evaluated on
-    neighbour lists updated at the drifted positions.
+    neighbour lists updated at the drifted positions.  A solid with ``substeps > 1`` is
+    sub-cycled inside the step (:mod:`sphjax.integration.split`).
     """
+    if split.split_active(model):
+        return split.kick_drift_kick(state, neighbors, dt, model, params)
     updated = []
 
     def rates(drifted, density_step):

@@ -2,7 +2,8 @@
 
 Fluid: ``dt = min(CFL h / (c0 + |v|max), 0.125 h^2 / nu, 0.25 sqrt(h / |g|))``, CFL 0.25.
 Solid (TLSPH): ``dt = CFL h / (c_s + |v|max)``, ``c_s = sqrt(K / rho0)``,
-``K = E / (d (1 - 2 nu))``, CFL 0.3.
+``K = E / (d (1 - 2 nu))``, CFL 0.3; ``substeps`` times that with split integration
+(``SolidSystem.substeps``: the solid takes that many steps of its own per step).
 
 ``MAX_*_CFL`` are the largest Courant numbers :func:`sphjax.simulate` accepts; a larger
 time step is rejected before the run starts.
@@ -16,6 +17,7 @@ import numpy as np
 
 from sphjax.core.state import Kind, State
 from sphjax.physics.fluid.system import FluidSystem
+from sphjax.physics.solid.system import SolidSystem
 
 FLUID_CFL = 0.25
 SOLID_CFL = 0.3
@@ -50,7 +52,8 @@ def stable_time_step(
     if int(Kind.SOLID) in model.particle_kinds:
         v_max = float(speed[kinds == Kind.SOLID].max(initial=0.0))
         c_s = float(solid_sound_speed(params, model.dim))
-        limits.append(solid_cfl * h / (c_s + v_max))
+        substeps = model.system(SolidSystem).substeps
+        limits.append(substeps * solid_cfl * h / (c_s + v_max))
     if not limits:
         raise ValueError("the model has no fluid or solid particles to set a time step")
     return min(limits)

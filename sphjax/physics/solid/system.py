@@ -57,12 +57,19 @@ class SolidSystem:
         ``(t, X) -> x`` giving the prescribed positions of clamped particles.
       boundary: :class:`~sphjax.SolidBoundary`, how a fluid in the same model sees the
         solid (fluid-structure interaction, :mod:`sphjax.physics.fsi`).
+      substeps: split integration (:mod:`sphjax.integration.split`): with ``k > 1`` the
+        solid advances in ``k`` steps of ``dt / k`` of its own inside every step of
+        :func:`sphjax.simulate`, its elastic forces re-evaluated in each and the fluid's
+        forces on it applied as half kicks at the ends of the step; the time step is then
+        limited by the fluid and ``k`` times the solid's stable step.  ``1``: one step
+        for all.
     """
 
     material: object = StVenantKirchhoff()
     penalty: object = None
     clamped_motion: Callable[[Any, Any], Any] | None = None
     boundary: SolidBoundary = SolidBoundary()
+    substeps: int = 1
 
     kinds = (Kind.SOLID, Kind.CLAMPED)
     current_configuration = False
@@ -80,6 +87,12 @@ class SolidSystem:
         if not isinstance(self.boundary, SolidBoundary):
             raise ValueError(
                 f"SolidSystem.boundary must be SolidBoundary(...), got {self.boundary!r}"
+            )
+
+        if not (isinstance(self.substeps, int) and self.substeps >= 1):
+            raise ValueError(
+                f"SolidSystem.substeps must be a positive integer (1: no split integration), "
+                f"got {self.substeps!r}"
             )
 
     def replace(self, **changes) -> SolidSystem:
