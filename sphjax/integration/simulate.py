@@ -38,6 +38,7 @@ from sphjax.physics.rhs import (
     evaluate,
     overflowed,
     update_neighbors,
+    with_reference,
 )
 
 
@@ -52,6 +53,11 @@ class SimulationError(RuntimeError):
 class NeighborOverflowError(RuntimeError):
     """The neighbour list ran out of room where it cannot be re-allocated."""
 
+
+#: room above the largest neighbour count in the lists of a concrete (chunked) run, which
+#: re-allocates on overflow; traced runs (grad, jit) cannot and keep
+#: ``Model.neighbor_capacity``
+NEIGHBOR_MARGIN = 0.05
 
 _KEEP_UPDATE = jax.checkpoint_policies.save_only_these_names(UPDATE_FIELDS)
 _KEEP_NEIGHBOR_IDX = jax.checkpoint_policies.save_only_these_names(NEIGHBOR_IDX, UPDATE_FIELDS)
@@ -144,6 +150,8 @@ def _run_frames(carry, dt, params, *, model, save_every, n_frames, checkpoint_ev
     # one more level would replay the whole frame once more in reverse mode.
     return jax.lax.scan(frame, carry, None, length=n_frames)
 
+
+_with_reference = jax.jit(with_reference, static_argnames="model")
 
 _run_chunk = jax.jit(
     _run_frames, static_argnames=("model", "save_every", "n_frames", "checkpoint_every")
@@ -255,7 +263,14 @@ def simulate(
     # Allocation needs concrete values; inside an outer ``jit`` the jax-md set-up would
     # otherwise be staged out and fail on a traced box size.
     with jax.ensure_compile_time_eval():
-        neighbors = build_neighbors(neighbor_state, model, compact_rows=not traced)
+        neighbors = build_neighbors(
+            neighbor_state,
+            model,
+            compact_rows=not traced,
+            margin=None if traced else NEIGHBOR_MARGIN,
+        )
+    # the solids' reference quantities (L0), once per run, from the (maybe traced) state
+    neighbors = _with_reference(state, neighbors, model)
     if traced:
         run = functools.partial(_simulate_traced, checkpoint_every=checkpoint_every)
     else:
@@ -377,8 +392,11 @@ def _run_chunk_growing(carry, dt, params, model, save_every, n_frames, extra):
         old = capacity(neighbors.search)
         # grow on every retry: the chunk's start positions may need less room than the
         # positions where it overflowed
-        extra[0] = max(extra[0] + old // 2, 1)
-        neighbors = build_neighbors(state, model, extra_capacity=extra[0], compact_rows=True)
+        extra[0] = max(extra[0] + old // 8, 2)
+        neighbors = build_neighbors(
+            state, model, extra_capacity=extra[0], compact_rows=True, margin=NEIGHBOR_MARGIN
+        )
+        neighbors = neighbors.replace(reference=carry[1].reference)
         carry = (state, neighbors, *carry[2:])
         warnings.warn(
             f"neighbour list overflowed near step {int(step)}; re-allocated "
