@@ -278,7 +278,8 @@ def simulate(
     if order is not None:
         back = ordering.inverse(order)
         state = ordering.permute(state, order)
-        neighbor_state = ordering.permute(neighbor_state, order)
+        with jax.ensure_compile_time_eval():  # concrete even inside an outer jit
+            neighbor_state = ordering.permute(neighbor_state, order)
         if on_frames is not None:
             on_frames = functools.partial(_in_user_order, on_frames, back)
     # Allocation needs concrete values; inside an outer ``jit`` the jax-md set-up would
