@@ -11,8 +11,10 @@ and tree it prints the best wall-clock and CPU seconds per step and the ratios
 
 Cases: ``tg10k``/``tg40k`` (2D Taylor-Green as in ``throughput.py``, float32), ``dam``
 (dam break ``n = 80``, 15k particles, the case's defaults), ``plate`` (oscillating plate
-``n = 32``, 10k solid particles).  Timed: ``sphjax.simulate`` of ``--steps`` steps after
-an untimed warm-up call (compilation).  A benchmark reports; it asserts nothing.
+``n = 32``, 10k solid particles), ``plate_grad`` (``jax.grad`` of the plate's summed
+heights w.r.t. the Young modulus, ``n = 16``, 2.6k particles, ``checkpoint_every=25``).
+Timed: ``sphjax.simulate`` of ``--steps`` steps (or its gradient) after an untimed warm-up
+call (compilation).  A benchmark reports; it asserts nothing.
 """
 
 from __future__ import annotations
@@ -42,9 +44,23 @@ elif name == "dam":
 elif name == "plate":
     case = sphjax.cases.oscillating_plate(n=32)
     dt = case.dt
-def run():
-    traj = sphjax.simulate(case, n_steps=steps, save_every=steps, dt=dt)
-    jax.block_until_ready(traj.states.position)
+else:
+    dt = None
+if name.endswith("_grad"):
+    import jax.numpy as jnp
+    case = sphjax.cases.oscillating_plate(n=16)
+    def loss(E):
+        params = case.params.replace(young_modulus=E)
+        final = sphjax.simulate(case, params, n_steps=steps, checkpoint_every=25).final
+        return jnp.sum(final.position[:, 1])
+    grad = jax.jit(jax.grad(loss))
+    E0 = jnp.asarray(case.params.young_modulus)
+    def run():
+        jax.block_until_ready(grad(E0))
+else:
+    def run():
+        traj = sphjax.simulate(case, n_steps=steps, save_every=steps, dt=dt)
+        jax.block_until_ready(traj.states.position)
 run()
 wall, cpu = [], []
 for _ in range(repeats):
