@@ -161,15 +161,23 @@ def plot(results: list[dict], out: Path) -> None:
         rs = sorted(rs, key=lambda r: r["particles"])
         n = [r["particles"] for r in rs]
         label = f"{dim}D {mode}"
-        ax1.plot(n, [r["rate"] for r in rs], "o-", label=label)
+        (line,) = ax1.plot(n, [r["rate"] for r in rs], "o-", label=f"{label}, wall")
+        ax1.plot(
+            n,
+            [r["rate_cpu"] for r in rs],
+            "s--",
+            color=line.get_color(),
+            alpha=0.6,
+            label=f"{label}, per CPU-s",
+        )
         ax2.plot(n, [r["bytes_per_particle"] / 1024 for r in rs], "o-", label=label)
     for ax in (ax1, ax2):
         ax.set_xscale("log")
         ax.set_xlabel("particles")
         ax.grid(True, which="both", alpha=0.3)
-        ax.legend()
+        ax.legend(fontsize=7)
     ax1.set_yscale("log")
-    ax1.set_ylabel("particle-steps per second (wall)")
+    ax1.set_ylabel("particle-steps per second")
     ax2.set_ylabel("peak memory per particle (KiB)")
     fig.suptitle("sphjax on a 2-core CPU, float32 (benchmarks/scaling.py)")
     fig.tight_layout()
