@@ -16,8 +16,10 @@ Solids use their reference-configuration neighbours, found once
 
 from __future__ import annotations
 
+import collections
 import dataclasses
 import functools
+import hashlib
 import math
 
 import jax
@@ -93,10 +95,23 @@ class NeighborSearch:
                 format=partition.Dense,
             )
 
-    def allocate(self, position, extra_capacity: int = 0):
-        """A new neighbour list for concrete ``position`` (outside ``jit``)."""
+    def allocate(self, position, extra_capacity: int = 0, margin: float | None = None):
+        """A new neighbour list for concrete ``position`` (outside ``jit``).
+
+        ``margin``: ``None`` sizes the list ``Model.neighbor_capacity`` times the largest
+        neighbour count now, plus ``extra_capacity``; a number sizes it the largest count
+        times ``1 + margin``, plus ``extra_capacity`` (for a driver that re-allocates on
+        overflow: fewer padded slots, each of which costs as much as a neighbour).
+        """
         fns = self._functions(self.skin)
         neighbors = fns.allocate(self.to_box(jnp.asarray(position)), extra_capacity=extra_capacity)
+        if margin is not None:
+            n = neighbors.idx.shape[0]
+            most = int(jnp.max(jnp.sum(neighbors.idx < n, axis=1), initial=0))
+            width = max(1, int(math.ceil(most * (1.0 + margin))) + int(extra_capacity))
+            if width < capacity(neighbors):
+                # jax-md packs each row's neighbours first: the columns cut hold padding
+                neighbors = neighbors.set(idx=neighbors.idx[:, :width], max_occupancy=width)
         # The update and cell-list functions are static (pytree metadata) in the list: new
         # function objects at every allocation would make every jitted step recompile.
         # ``_functions`` is cached; jax-md makes a new cell-list function object at each
@@ -119,8 +134,19 @@ def capacity(neighbors) -> int:
     return int(neighbors.idx.shape[-1])
 
 
+#: reference neighbour lists already built, by content (a loop over ``simulate`` calls,
+#: calibration or data generation, searches its solid's reference configuration once)
+_REFERENCE_LISTS: collections.OrderedDict = collections.OrderedDict()
+_REFERENCE_LISTS_KEPT = 8
+
+
 def reference_neighbors(reference_position, members, model) -> np.ndarray:
-    """Reference-configuration neighbour indices among ``members`` (computed once, numpy).
+    """Reference-configuration neighbour indices among ``members`` (numpy; built once per
+    reference configuration and kept for later calls with the same positions and model).
+
+    A vectorised cell list: the members are sorted by cell, and every member's candidates
+    are the members of its own and the adjacent cells, filtered by distance (minimum
+    image on periodic axes).  Each row lists its neighbours in increasing index order.
 
     Args:
       reference_position: ``[N, d]`` reference positions ``X``.
@@ -130,38 +156,77 @@ def reference_neighbors(reference_position, members, model) -> np.ndarray:
       excluded), padded with ``N``.
     """
     X = np.asarray(reference_position, dtype=np.float64)
-    members = np.asarray(members)
-    n = X.shape[0]
+    members = np.asarray(members, dtype=np.int64)
+    digest = hashlib.sha1(X.tobytes())
+    digest.update(members.tobytes())
+    key = (model.cutoff, model.domain, X.shape, digest.hexdigest())
+    if key in _REFERENCE_LISTS:
+        _REFERENCE_LISTS.move_to_end(key)
+        return _REFERENCE_LISTS[key]
+    idx = _reference_search(X, members, model)
+    idx.setflags(write=False)
+    _REFERENCE_LISTS[key] = idx
+    if len(_REFERENCE_LISTS) > _REFERENCE_LISTS_KEPT:
+        _REFERENCE_LISTS.popitem(last=False)
+    return idx
+
+
+def _reference_search(X, members, model) -> np.ndarray:
+    """:func:`reference_neighbors` without the cache: a vectorised cell list."""
+    n, dim = X.shape
+    m = members.shape[0]
+    if m == 0:
+        return np.full((0, 1), n, dtype=np.int32)
     Xm = X[members]
-    cutoff = model.cutoff
-    domain = model.domain
-    size = np.array(domain.size)
-    periodic = np.array(domain.periodic)
-    # cell binning on the reference configuration
-    cell = np.floor((Xm - Xm.min(0)) / cutoff).astype(np.int64)
-    buckets: dict[tuple, list[int]] = {}
-    for k, c in enumerate(map(tuple, cell)):
-        buckets.setdefault(c, []).append(k)
-    offsets = (
-        np.array(np.meshgrid(*[[-1, 0, 1]] * X.shape[1], indexing="ij")).reshape(X.shape[1], -1).T
-    )
-    lists = []
-    for k, c in enumerate(cell):
-        cand = []
+    cutoff = float(model.cutoff)
+    size = np.array(model.domain.size, dtype=np.float64)
+    periodic = np.array(model.domain.periodic, dtype=bool)
+    lower = np.where(periodic, np.array(model.domain.lower, dtype=np.float64), Xm.min(0))
+    extent = np.where(periodic, size, Xm.max(0) - lower)
+    # cells at least ``cutoff`` wide; a periodic axis with fewer than 3 cells is one cell
+    n_cells = np.maximum(1, np.floor(extent / cutoff).astype(np.int64))
+    n_cells = np.where(periodic & (n_cells < 3), 1, n_cells)
+    width = np.where(periodic, extent / n_cells, cutoff)
+    cell = np.floor((Xm - lower) / width).astype(np.int64)
+    cell = np.where(periodic, np.mod(cell, n_cells), np.clip(cell, 0, None))
+    n_cells = np.maximum(n_cells, cell.max(0) + 1)
+    strides = np.cumprod(np.concatenate([[1], n_cells[:-1]]))
+    key = cell @ strides
+    order = np.argsort(key, kind="stable")
+    sorted_key = key[order]
+    axes = [[0] if (periodic[i] and n_cells[i] == 1) else [-1, 0, 1] for i in range(dim)]
+    offsets = np.array(np.meshgrid(*axes, indexing="ij")).reshape(dim, -1).T
+    rows, cols = [], []
+    chunk = max(1, 2_000_000 // max(1, len(offsets)))
+    for lo in range(0, m, chunk):
+        k = np.arange(lo, min(m, lo + chunk))
         for off in offsets:
-            cand.extend(buckets.get(tuple(c + off), ()))
-        cand = np.array([q for q in cand if q != k], dtype=np.int64)
-        if cand.size:
-            dr = Xm[k] - Xm[cand]
-            if periodic.any():
-                dr = minimum_image(dr, size, periodic)
-            close = np.sum(dr * dr, axis=1) < cutoff**2
-            cand = cand[close]
-        lists.append(members[cand] if cand.size else np.zeros(0, np.int64))
-    width = max(1, max(len(x) for x in lists))
-    idx = np.full((len(members), width), n, dtype=np.int32)
-    for k, x in enumerate(lists):
-        idx[k, : len(x)] = x
+            c = cell[k] + off
+            inside = np.all(periodic | ((c >= 0) & (c < n_cells)), axis=1)
+            c = np.where(periodic, np.mod(c, n_cells), c)
+            ck = c @ strides
+            first = np.searchsorted(sorted_key, ck, side="left")
+            count = np.where(inside, np.searchsorted(sorted_key, ck, side="right") - first, 0)
+            total = int(count.sum())
+            if total == 0:
+                continue
+            row = np.repeat(k, count)
+            start = np.repeat(first - np.cumsum(count) + count, count)
+            col = order[start + np.arange(total)]
+            rows.append(row)
+            cols.append(col)
+    row = np.concatenate(rows)
+    col = np.concatenate(cols)
+    dr = minimum_image(Xm[row] - Xm[col], size, periodic)
+    close = (np.sum(dr * dr, axis=1) < cutoff**2) & (row != col)
+    row, col = row[close], col[close]
+    pair_order = np.argsort(row * m + col)
+    row, col = row[pair_order], col[pair_order]
+    counts = np.bincount(row, minlength=m)
+    width = max(1, int(counts.max(initial=0)))
+    slot = np.arange(row.shape[0]) - np.repeat(np.cumsum(counts) - counts, counts)
+    idx = np.full((m, width), n, dtype=np.int32)
+    idx[row, slot] = members[col]
     return idx
 
 

@@ -22,6 +22,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from sphjax.core import ordering
 from sphjax.core.case import Case
 from sphjax.core.model import Model
 from sphjax.core.neighbors import capacity
@@ -38,7 +39,9 @@ from sphjax.physics.rhs import (
     check_params,
     evaluate,
     overflowed,
+    system_blocks,
     update_neighbors,
+    with_reference,
 )
 
 
@@ -53,6 +56,11 @@ class SimulationError(RuntimeError):
 class NeighborOverflowError(RuntimeError):
     """The neighbour list ran out of room where it cannot be re-allocated."""
 
+
+#: room above the largest neighbour count in the lists of a concrete (chunked) run, which
+#: re-allocates on overflow; traced runs (grad, jit) cannot and keep
+#: ``Model.neighbor_capacity``
+NEIGHBOR_MARGIN = 0.05
 
 _KEEP_UPDATE = jax.checkpoint_policies.save_only_these_names(UPDATE_FIELDS)
 _KEEP_NEIGHBOR_IDX = jax.checkpoint_policies.save_only_these_names(NEIGHBOR_IDX, UPDATE_FIELDS)
@@ -149,6 +157,8 @@ def _run_frames(carry, dt, params, *, model, save_every, n_frames, checkpoint_ev
     return jax.lax.scan(frame, carry, None, length=n_frames)
 
 
+_with_reference = jax.jit(with_reference, static_argnames="model")
+
 _run_chunk = jax.jit(
     _run_frames, static_argnames=("model", "save_every", "n_frames", "checkpoint_every")
 )
@@ -169,8 +179,10 @@ def _expand(state: State) -> State:
     return jax.tree_util.tree_map(lambda x: x[None], state)
 
 
-def _raise_failure(failure, dt):
+def _raise_failure(failure, dt, order=None):
     step, particle = (int(x) for x in np.asarray(failure))
+    if order is not None:
+        particle = int(order[particle])
     if step >= 0:
         raise SimulationError(
             f"simulation went unstable at step {step} (t = {step * float(dt):.6g}): particle "
@@ -203,6 +215,7 @@ def simulate(
     on_frames: Callable[[State, jax.Array], None] | None = None,
     progress: Callable[[int], None] | None = None,
     steps_per_chunk: int = 2000,
+    cell_order: bool = True,
 ) -> Trajectory:
     """Run ``case`` and return its Trajectory (the initial frame first).
 
@@ -224,6 +237,10 @@ def simulate(
       on_frames: ``f(states, times)`` called with each finished block of frames (concrete
         runs only); used to append to HDF5 as the run goes.
       progress: ``f(n)`` called with the number of steps just completed.
+      cell_order: run with each system's particles in a space-filling order of their
+        cells (:mod:`sphjax.core.ordering`), so that neighbours are near in memory;
+        the Trajectory, ``on_frames`` and error messages keep the particles in the
+        order of ``state`` (results equal to round-off).  ``False``: run in that order.
     Returns:
       :class:`Trajectory` with ``ceil(n_steps / save_every) + 1`` frames.
     """
@@ -256,20 +273,43 @@ def simulate(
     dt = jnp.asarray(dt, state.position.dtype)
 
     neighbor_state = state if not _is_traced(state) else case.state
+    order = None
+    if cell_order:
+        blocks = system_blocks(np.asarray(neighbor_state.kind), model)
+        perm = ordering.cell_order(np.asarray(neighbor_state.position), blocks, model.cutoff)
+        if not np.array_equal(perm, np.arange(perm.shape[0])):
+            order = perm
+    if order is not None:
+        back = ordering.inverse(order)
+        state = ordering.permute(state, order)
+        with jax.ensure_compile_time_eval():  # concrete even inside an outer jit
+            neighbor_state = ordering.permute(neighbor_state, order)
+        if on_frames is not None:
+            on_frames = functools.partial(_in_user_order, on_frames, back)
     # Allocation needs concrete values; inside an outer ``jit`` the jax-md set-up would
     # otherwise be staged out and fail on a traced box size.
     with jax.ensure_compile_time_eval():
-        neighbors = build_neighbors(neighbor_state, model, compact_rows=not traced)
+        neighbors = build_neighbors(
+            neighbor_state,
+            model,
+            compact_rows=not traced,
+            margin=None if traced else NEIGHBOR_MARGIN,
+        )
+    # the solids' reference quantities (L0), once per run, from the (maybe traced) state
+    neighbors = _with_reference(state, neighbors, model)
     if traced:
-        run = functools.partial(_simulate_traced, checkpoint_every=checkpoint_every)
+        run = functools.partial(_simulate_traced, checkpoint_every=checkpoint_every, order=order)
     else:
         run = functools.partial(
             _simulate_in_chunks,
             on_frames=on_frames,
             progress=progress,
             steps_per_chunk=steps_per_chunk,
+            order=order,
         )
     states = run(state, neighbors, dt, params, model, segments=segments)
+    if order is not None:
+        states = ordering.permute(states, back, axis=1)
     steps = np.concatenate(
         [[0], np.arange(1, n_frames + 1) * save_every, [n_steps] if rest else []]
     )
@@ -277,12 +317,17 @@ def simulate(
     return Trajectory(states=states, times=times)
 
 
+def _in_user_order(on_frames, back, states, times):
+    """``on_frames`` with the frames' particles in the user's order."""
+    return on_frames(ordering.permute(states, back, axis=1), times)
+
+
 def _initial_carry(state, neighbors):
     """``(state, neighbors, failure, step)``: no failure recorded (-1, -1), step 0."""
     return state, neighbors, -jnp.ones(2, jnp.int32), jnp.zeros((), jnp.int32)
 
 
-def _simulate_traced(state, neighbors, dt, params, model, *, segments, checkpoint_every):
+def _simulate_traced(state, neighbors, dt, params, model, *, segments, checkpoint_every, order):
     """One ``lax.scan`` per segment of equal frames (under grad/jit/vmap); overflow and
     instability are raised from inside the computation.  Returns the frames, the initial
     one first."""
@@ -301,7 +346,7 @@ def _simulate_traced(state, neighbors, dt, params, model, *, segments, checkpoin
         )
         all_frames.append(frames)
     jax.debug.callback(_raise_overflow, overflowed(carry[1]))
-    jax.debug.callback(_raise_failure, carry[2], dt)
+    jax.debug.callback(functools.partial(_raise_failure, order=order), carry[2], dt)
     return _stack(all_frames)
 
 
@@ -316,6 +361,7 @@ def _simulate_in_chunks(
     on_frames,
     progress,
     steps_per_chunk,
+    order,
 ):
     """Compiled chunks of at most ``steps_per_chunk`` steps with concrete checks between
     them: a neighbour overflow re-allocates and repeats the chunk; an unstable run hands
@@ -324,6 +370,7 @@ def _simulate_in_chunks(
     bad = ~np.all(np.isfinite(np.asarray(state.acceleration)), axis=-1)
     if bad.any():
         particle = int(np.argmax(bad))
+        particle = particle if order is None else int(order[particle])
         raise SimulationError(
             f"the initial state has a non-finite acceleration at particle {particle} "
             "(step 0); check the initial density, mass and spacing of the case",
@@ -351,7 +398,7 @@ def _simulate_in_chunks(
                 kept = jax.tree_util.tree_map(operator.itemgetter(slice(good)), frames)
                 if on_frames is not None and good:
                     on_frames(kept, frame_times[:good])
-                _raise_failure(carry[2], dt)
+                _raise_failure(carry[2], dt, order)
             if on_frames is not None:
                 on_frames(frames, frame_times)
             all_frames.append(frames)
@@ -381,8 +428,11 @@ def _run_chunk_growing(carry, dt, params, model, save_every, n_frames, extra):
         old = capacity(neighbors.search)
         # grow on every retry: the chunk's start positions may need less room than the
         # positions where it overflowed
-        extra[0] = max(extra[0] + old // 2, 1)
-        neighbors = build_neighbors(state, model, extra_capacity=extra[0], compact_rows=True)
+        extra[0] = max(extra[0] + old // 8, 2)
+        neighbors = build_neighbors(
+            state, model, extra_capacity=extra[0], compact_rows=True, margin=NEIGHBOR_MARGIN
+        )
+        neighbors = neighbors.replace(reference=carry[1].reference)
         carry = (state, neighbors, *carry[2:])
         warnings.warn(
             f"neighbour list overflowed near step {int(step)}; re-allocated "

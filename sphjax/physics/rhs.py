@@ -44,7 +44,7 @@ from sphjax.physics.boundary.system import WallSystem, update_wall
 from sphjax.physics.fluid.system import FluidSystem, update_fluid
 from sphjax.physics.interactions import INTERACTIONS, UPDATE_PAIRS
 from sphjax.physics.pairs import Geometry, PairList
-from sphjax.physics.solid.system import SolidSystem, update_solid
+from sphjax.physics.solid.system import SolidSystem, solid_reference, update_solid
 
 NEIGHBOR_IDX = "sphjax_neighbor_idx"
 #: name of the per-particle fields of the update stage (density, pressure) that reverse
@@ -107,6 +107,9 @@ class Neighbors:
       member_capacities: ``((i, j), M)`` for the lists whose rows are compacted to the
         ``M`` particles of system ``i`` that have neighbours in system ``j`` at all (a
         fluid against its walls: :attr:`PairList.members`).
+      reference: ``None``, or ``{i: fields}`` the reference-configuration quantities of
+        each solid ``i`` (its correction matrix ``L0``), computed once per run from the
+        initial State by :func:`with_reference`; ``None``: each evaluation computes them.
     """
 
     search: object
@@ -116,6 +119,7 @@ class Neighbors:
     union: tuple | None
     capacities: tuple
     member_capacities: tuple = ()
+    reference: dict | None = None
 
 
 #: compact a list's rows when at most this fraction of them has neighbours
@@ -154,7 +158,11 @@ def _local(block, union):
 
 
 def build_neighbors(
-    state: State, model, extra_capacity: int = 0, compact_rows: bool = False
+    state: State,
+    model,
+    extra_capacity: int = 0,
+    compact_rows: bool = False,
+    margin: float | None = None,
 ) -> Neighbors:
     """Allocate neighbour data for concrete ``state`` (outside ``jit``).
 
@@ -163,6 +171,10 @@ def build_neighbors(
     count now; when more rows gain neighbours the list overflows, which the chunked
     driver answers by re-allocating, but a traced run (``grad``, ``jit``) cannot, so
     only the chunked driver asks for it.
+
+    ``margin``: ``None`` sizes every list ``Model.neighbor_capacity`` times its largest
+    neighbour count now; a number sizes it that count times ``1 + margin`` (the chunked
+    driver, which re-allocates on overflow, asks for a small one).
     """
     blocks = system_blocks(state.kind, model)
     wanted = neighbor_pairs(model)
@@ -171,15 +183,16 @@ def build_neighbors(
     if current:
         union = (blocks[current[0]][0], blocks[current[-1]][1])
         search = neighbor_search(model).allocate(
-            state.position[union[0] : union[1]], extra_capacity
+            state.position[union[0] : union[1]], extra_capacity, margin
         )
+        multiplier = model.neighbor_capacity if margin is None else 1.0 + margin
         for i, j in wanted:
             if i in current and j in current and len(current) > 1 and _searched_pair(model, i, j):
                 width = measured_capacity(
                     search.idx,
                     _local(blocks[i], union),
                     _local(blocks[j], union),
-                    model.neighbor_capacity,
+                    multiplier,
                     extra_capacity,
                 )
                 capacities.append(((i, j), min(width, capacity(search))))
@@ -269,6 +282,24 @@ def _split_overflow(neighbors: Neighbors, model):
         if (i, j) in members:
             flags.append(compact_rows(lst, _size(blocks[j]), members[(i, j)])[3])
     return jnp.any(jnp.stack(flags))
+
+
+def with_reference(state: State, neighbors: Neighbors, model) -> Neighbors:
+    """``neighbors`` with each solid's reference-configuration quantities (``L0``, eq. 15)
+    computed from ``state``.
+
+    They depend only on the reference positions and volumes, which no step changes, so a
+    run computes them once (:func:`sphjax.simulate`) instead of at every evaluation; as
+    they are computed from ``state`` (traced under ``jax.grad``), derivatives through them
+    are those of the per-step computation.
+    """
+    ctx = Context(None, Geometry.of(model), model.pair_adjoint, model.pair_block)
+    reference = {}
+    for i, system in enumerate(model.systems):
+        if isinstance(system, SolidSystem) and _size(neighbors.blocks[i]):
+            view = _view(state, neighbors.blocks[i], system, None)
+            reference[i] = solid_reference(view, neighbors.pairs[(i, i)], ctx)
+    return dataclasses.replace(neighbors, reference=reference or None)
 
 
 def update_neighbors(position, neighbors: Neighbors, model, rebuild=False) -> Neighbors:
@@ -401,7 +432,8 @@ def update_stage(state: State, neighbors: Neighbors, model, params, density_step
                     views[i] = update_wall(system, views[i], fluid_system, views[j], pairs, ctx)
     for i, system in enumerate(model.systems):
         if isinstance(system, SolidSystem) and _size(blocks[i]):
-            views[i] = update_solid(system, views[i], neighbors.pairs[(i, i)], ctx)
+            reference = (neighbors.reference or {}).get(i)
+            views[i] = update_solid(system, views[i], neighbors.pairs[(i, i)], ctx, reference)
             for j, fluid_system in enumerate(model.systems):
                 if (i, j) in neighbors.pairs and isinstance(fluid_system, FluidSystem):
                     views[i] = fsi.update_solid_boundary(

@@ -110,18 +110,32 @@ def _deformation_summand(pair, a, b, shared, *, domain):
     return deformation_term(dx, corrected_kernel_gradient(a["L0"], pair.grad_w), b["V"])
 
 
-def update_solid(system: SolidSystem, solid: dict, pairs, ctx):
+def solid_reference(solid: dict, pairs, ctx) -> dict:
+    """The reference-configuration quantities of a solid: ``{"L0": L0}`` (eq. 15).
+
+    They depend on the reference positions ``X`` and volumes ``V`` only, never on the
+    current configuration or the material parameters.
+    """
+    rows = {"x": solid["X"], "V": solid["V"]}
+    moment = ctx.pair_sum(_moment_summand, rows, None, pairs, weight="V", parity=1)
+    return {"L0": correction_matrix(moment)}
+
+
+def update_solid(system: SolidSystem, solid: dict, pairs, ctx, reference=None):
     """Update stage of a solid: ``L0`` (eq. 15), ``F`` (eq. 16) and the stress ``P L0``.
 
     Args:
       solid: fields ``X`` (reference positions), ``x`` (current), ``V`` (reference
         volumes).
       pairs: the reference-configuration list within the solid.
+      reference: :func:`solid_reference` of this solid, computed once per run, or
+        ``None`` (computed here).
     Returns:
       ``solid`` with ``L0``, ``F``, ``P`` and ``P L0`` (``[n, d, d]``).
     """
-    rows = {"x": solid["X"], "V": solid["V"]}
-    L0 = correction_matrix(ctx.pair_sum(_moment_summand, rows, None, pairs, weight="V", parity=1))
+    if reference is None:
+        reference = solid_reference(solid, pairs, ctx)
+    L0 = reference["L0"]
     summand = functools.partial(_deformation_summand, domain=ctx.geometry.domain)
     rows = {"x": solid["X"], "xc": solid["x"], "V": solid["V"], "L0": L0}
     F = ctx.pair_sum(summand, rows, None, pairs)
