@@ -83,3 +83,17 @@ def test_the_documented_command_writes_the_documented_metadata(tmp_path):
             assert meta[key] == pytest.approx(want), key
         else:
             assert meta[key] == want, key
+
+
+def test_the_shipped_model_was_trained_on_the_documented_dataset():
+    # docs/models/tg32_gns.eqx must come from the reproduce command (today's defaults)
+    from sphjax.surrogate import LearnedSimulator
+
+    doc = _documented_metadata()
+    sim, model = LearnedSimulator.load(ROOT / "docs" / "models" / "tg32_gns.eqx")
+    meta = json.loads((ROOT / "docs" / "models" / "tg32_gns.eqx.json").read_text())["metadata"]
+    for key in ("case", "case_kwargs", "steps", "write_every", "sequence_length_train", "seed"):
+        assert meta[key] == doc[key], key
+    assert meta["perturbation"] == doc["perturbation"]
+    assert sim.metadata["dx"] == pytest.approx(doc["dx"])
+    assert model is not None

@@ -53,3 +53,13 @@ def test_bad_arguments_are_named(problem):
         sil.Corrector(problem, jax.random.PRNGKey(0), mode="hybrid")
     with pytest.raises(ValueError, match="ratio must be a positive integer"):
         sil.make_problem(problem.coarse, problem.fine, horizon=2, ratio=0, viscosities=[0.01])
+    with pytest.raises(ValueError, match="viscosities or conditions, not both"):
+        sil.make_problem(
+            problem.coarse, problem.fine, horizon=2, ratio=2, viscosities=[0.01], conditions=[{}]
+        )
+    # a closed tank may differ in its wall layers, a periodic box may not differ at all
+    other = sphjax.cases.dam_break(n=4)
+    with pytest.raises(ValueError, match="share the periodic axes"):
+        sil.make_problem(problem.coarse, other, horizon=2, ratio=2)
+    with pytest.raises(ValueError, match="probe_box must be"):
+        sil.make_problem(problem.coarse, problem.fine, horizon=2, ratio=2, probe_box=((0, 1),))

@@ -1,14 +1,18 @@
-"""Solver in the loop on the 2D Taylor-Green vortex: a learned correction of a coarse
-sphjax simulation against the coarse solver alone and the pure graph network.
+"""Solver in the loop on the 2D Taylor-Green vortex or the dam break: a learned correction
+of a coarse sphjax simulation against the coarse solver alone and the pure graph network.
 
-    python docs/scripts/solver_in_the_loop.py --out docs/figures/sil_tg.json --seconds 900
+    python docs/scripts/solver_in_the_loop.py --out docs/figures/sil_tg.json --seconds 300
+    python docs/scripts/solver_in_the_loop.py --case dam_break --n 8 --out sil_db.json
     python docs/scripts/solver_in_the_loop.py --small --out /tmp/sil.json   # about a minute
 
-Coarse: ``taylor_green(n=N)``, step ``dt_c`` (its stable step); fine reference:
-``taylor_green(n=RATIO*N)`` with ``dt_c / RATIO``.  Trained on the viscosities
-``--train-nu``, evaluated on ``--test-nu`` (not seen in training); errors are the relative
-L2 probe-velocity errors of :mod:`sphjax.surrogate.solver_in_the_loop` at coarse steps
-20 and 100.  Both networks get the same wall-clock budget (after compilation).
+Coarse: ``taylor_green(n=N)`` (``dam_break(n=N)``), step ``dt_c`` (its stable step); fine
+reference: the same case at ``n=RATIO*N`` with ``dt_c / RATIO``.  Taylor-Green: trained on
+the viscosities ``--train-nu``, evaluated on ``--test-nu``; dam break: trained on the
+artificial-viscosity ``alpha`` of ``--train-alpha``, evaluated on ``--test-alpha`` (not
+seen in training), probes over ``[0, 2 L] x [0, H]`` (twice the column's width, its
+height).  Errors are the relative L2 probe-velocity errors of
+:mod:`sphjax.surrogate.solver_in_the_loop` at coarse steps 20 and 100.  Both networks get
+the same wall-clock budget (after compilation).
 """
 
 from __future__ import annotations
@@ -28,6 +32,7 @@ from sphjax.surrogate import solver_in_the_loop as sil
 def main(argv=None) -> dict:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--out", required=True, help="JSON file for the results")
+    p.add_argument("--case", choices=["taylor_green", "dam_break"], default="taylor_green")
     p.add_argument("--n", type=int, default=12, help="coarse particles per side")
     p.add_argument("--ratio", type=int, default=2, help="fine / coarse resolution and step")
     p.add_argument("--horizon", type=int, default=100, help="coarse steps of the reference")
@@ -35,6 +40,8 @@ def main(argv=None) -> dict:
     p.add_argument("--seconds", type=float, default=900.0, help="training budget per network")
     p.add_argument("--train-nu", type=float, nargs="+", default=[0.008, 0.012])
     p.add_argument("--test-nu", type=float, default=0.01)
+    p.add_argument("--train-alpha", type=float, nargs="+", default=[0.05, 0.15])
+    p.add_argument("--test-alpha", type=float, default=0.1)
     p.add_argument("--latent", type=int, default=16)
     p.add_argument("--lr", type=float, default=1e-3)
     p.add_argument("--fine-seeds", type=int, default=4, help="fine runs averaged (disorders)")
@@ -47,14 +54,24 @@ def main(argv=None) -> dict:
         args.n, args.horizon, args.unroll, args.seconds, args.fine_seeds = 8, 20, 5, 10.0, 2
 
     t0 = time.perf_counter()
-    coarse = sphjax.cases.taylor_green(n=args.n)
-    # the fine reference: the mean over an ensemble of disordered starts (--fine-seeds)
-    fine = [
-        sphjax.cases.taylor_green(n=args.ratio * args.n, seed=s) for s in range(args.fine_seeds)
-    ]
     make = dict(horizon=args.horizon, ratio=args.ratio, probes_per_side=16)
-    train_problem = sil.make_problem(coarse, fine, viscosities=args.train_nu, **make)
-    test_problem = sil.make_problem(coarse, fine, viscosities=[args.test_nu], **make)
+    if args.case == "taylor_green":
+        coarse = sphjax.cases.taylor_green(n=args.n)
+        # the fine reference: the mean over an ensemble of disordered starts (--fine-seeds)
+        fine = [
+            sphjax.cases.taylor_green(n=args.ratio * args.n, seed=s) for s in range(args.fine_seeds)
+        ]
+        train_c = [{"kinematic_viscosity": nu} for nu in args.train_nu]
+        test_c = [{"kinematic_viscosity": args.test_nu}]
+    else:
+        coarse = sphjax.cases.dam_break(n=args.n)
+        fine = sphjax.cases.dam_break(n=args.ratio * args.n)  # a lattice start: one run
+        info = coarse.info
+        make["probe_box"] = ((0.0, 2 * info["column_width"]), (0.0, info["column_height"]))
+        train_c = [{"artificial_alpha": a} for a in args.train_alpha]
+        test_c = [{"artificial_alpha": args.test_alpha}]
+    train_problem = sil.make_problem(coarse, fine, conditions=train_c, **make)
+    test_problem = sil.make_problem(coarse, fine, conditions=test_c, **make)
     setup_seconds = time.perf_counter() - t0
 
     report = [k for k in (20, 100) if k <= args.horizon] or [args.horizon]
@@ -62,7 +79,7 @@ def main(argv=None) -> dict:
         settings=dict(
             vars(args),
             coarse_particles=coarse.n_particles,
-            fine_particles=fine[0].n_particles,
+            fine_particles=train_problem.fine.n_particles,
             dt_coarse=train_problem.dt,
             setup_seconds=setup_seconds,
         ),

@@ -232,13 +232,29 @@ class LearnedSimulator:
         path = Path(path)
         path.parent.mkdir(parents=True, exist_ok=True)
         eqx.tree_serialise_leaves(path, model)
-        info = dict(config=dataclasses.asdict(self.config), metadata=self.metadata)
+        floats = [a.dtype for a in jax.tree_util.tree_leaves(model) if _is_float(a)]
+        info = dict(
+            config=dataclasses.asdict(self.config),
+            metadata=self.metadata,
+            dtype=str(floats[0]) if floats else "float32",
+        )
         path.with_suffix(path.suffix + ".json").write_text(json.dumps(info, indent=1))
 
     @classmethod
     def load(cls, path) -> tuple[LearnedSimulator, GNS]:
+        """Weights saved by :meth:`save`, in the float dtype they were saved with (files
+        without a ``dtype`` entry: float32), whether or not x64 is enabled now."""
         path = Path(path)
         info = json.loads(path.with_suffix(path.suffix + ".json").read_text())
         sim = cls(info["metadata"], SimulatorConfig(**info["config"]))
-        model = eqx.tree_deserialise_leaves(path, sim.init_model(jax.random.PRNGKey(0)))
+        dtype = jnp.dtype(info.get("dtype", "float32"))
+        like = jax.tree_util.tree_map(
+            lambda a: a.astype(dtype) if _is_float(a) else a,
+            sim.init_model(jax.random.PRNGKey(0)),
+        )
+        model = eqx.tree_deserialise_leaves(path, like)
         return sim, model
+
+
+def _is_float(a) -> bool:
+    return isinstance(a, jax.Array | np.ndarray) and jnp.issubdtype(a.dtype, jnp.floating)

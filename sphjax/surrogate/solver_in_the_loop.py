@@ -48,13 +48,12 @@ from sphjax.surrogate.graph import RadiusGraph, overflowed
 MODES = ("correction", "gns")
 
 
-def probe_grid(case: Case, per_side: int) -> np.ndarray:
-    """Cell centres of a ``per_side^d`` grid over the case's domain, ``[P, d]``."""
+def probe_grid(case: Case, per_side: int, box=None) -> np.ndarray:
+    """Cell centres of a ``per_side^d`` grid over ``box`` (``[[lo, hi]] * d``; default the
+    case's domain), ``[P, d]``."""
     domain = case.model.domain
-    axes = [
-        lo + (np.arange(per_side) + 0.5) * (hi - lo) / per_side
-        for lo, hi in zip(domain.lower, domain.upper, strict=True)
-    ]
+    box = tuple(zip(domain.lower, domain.upper, strict=True)) if box is None else box
+    axes = [lo + (np.arange(per_side) + 0.5) * (hi - lo) / per_side for lo, hi in box]
     return np.stack(np.meshgrid(*axes, indexing="ij"), -1).reshape(-1, len(axes))
 
 
@@ -119,11 +118,18 @@ def make_problem(
     *,
     horizon: int,
     ratio: int,
-    viscosities,
+    viscosities=None,
+    conditions=None,
     probes_per_side: int = 16,
+    probe_box=None,
     dt: float | None = None,
+    speed: float | None = None,
 ) -> Problem:
-    """Simulate the fine reference for each kinematic viscosity in ``viscosities``.
+    """Simulate the fine reference for each condition.
+
+    A condition is a dict of Params fields to replace (``conditions=[{"artificial_alpha":
+    0.05}, ...]``); ``viscosities=[nu, ...]`` is short for
+    ``[{"kinematic_viscosity": nu}, ...]``; neither: the cases' own Params.
 
     ``fine`` is a Case or a list of Cases (an ensemble, e.g. Taylor-Green with several
     ``seed``s of the disordered start): the reference is the mean of their probe fields,
@@ -131,6 +137,13 @@ def make_problem(
     disorder (no coarse model could predict it).  The coarse step is ``dt`` (default the
     coarse case's stable step) and the fine one ``dt / ratio`` (checked against the fine
     stability limit by :func:`sphjax.simulate`).
+
+    The two cases must agree on the periodic axes (flags and bounds); on closed axes their
+    domains may differ (a tank's wall layers scale with ``dx``).  The probes are a
+    ``probes_per_side^d`` grid over ``probe_box`` (default: the part of the domain common
+    to all cases).  ``speed`` scales the network's inputs and outputs (default: the
+    largest initial speed, or ``sqrt(|g| H)`` over the probe box's height ``H`` for a case
+    at rest).
     """
     if isinstance(ratio, bool) or int(ratio) != ratio or int(ratio) < 1:
         raise ValueError(
@@ -141,36 +154,76 @@ def make_problem(
     fines = list(fine) if isinstance(fine, list | tuple) else [fine]
     if not fines:
         raise ValueError("fine must be a Case or a non-empty list of Cases")
+    if viscosities is not None and conditions is not None:
+        raise ValueError("give viscosities or conditions, not both")
+    if viscosities is not None:
+        conditions = [{"kinematic_viscosity": nu} for nu in viscosities]
+    conditions = [{}] if conditions is None else [dict(c) for c in conditions]
+    if not conditions:
+        raise ValueError("conditions must list at least one condition (a dict of Params)")
+    dc = coarse.model.domain
     for f in fines:
-        if coarse.model.domain != f.model.domain:
-            raise ValueError("coarse and fine cases must share one domain (the probes lie in it)")
+        df = f.model.domain
+        same = df.periodic == dc.periodic and all(
+            (lc, uc) == (lf, uf)
+            for lc, uc, lf, uf, per in zip(
+                dc.lower, dc.upper, df.lower, df.upper, dc.periodic, strict=True
+            )
+            if per
+        )
+        if not same:
+            raise ValueError(
+                "coarse and fine cases must share the periodic axes and their bounds "
+                "(the probes lie in one domain)"
+            )
+    if probe_box is None:
+        probe_box = tuple(
+            (
+                max(d.model.domain.lower[a] for d in [coarse, *fines]),
+                min(d.model.domain.upper[a] for d in [coarse, *fines]),
+            )
+            for a in range(coarse.model.dim)
+        )
+    probe_box = tuple((float(lo), float(hi)) for lo, hi in probe_box)
+    if len(probe_box) != coarse.model.dim or any(lo >= hi for lo, hi in probe_box):
+        raise ValueError(f"probe_box must be [[lo, hi]] * dim with lo < hi, got {probe_box}")
     dt = float(coarse.dt if dt is None else dt)
-    probes = probe_grid(coarse, probes_per_side)
-    conditions, reference = [], []
+    probes = probe_grid(coarse, probes_per_side, probe_box)
+    params_of, reference = [], []
 
-    def with_nu(params, nu):
-        return params.replace(kinematic_viscosity=jnp.asarray(nu, params.kinematic_viscosity.dtype))
+    def with_(params, condition):
+        return params.replace(
+            **{k: jnp.asarray(v, getattr(params, k).dtype) for k, v in condition.items()}
+        )
 
-    for nu in viscosities:
+    for condition in conditions:
         fields = []
         for f in fines:
             traj = simulate(
-                f, with_nu(f.params, nu), n_steps=horizon * ratio, save_every=ratio, dt=dt / ratio
+                f,
+                with_(f.params, condition),
+                n_steps=horizon * ratio,
+                save_every=ratio,
+                dt=dt / ratio,
             )
             # the fine field seen at the coarse resolution: the coarse kernel and h
             fields.append(jax.vmap(lambda s: probe_velocity(s, coarse, probes))(traj.states))
-        conditions.append((with_nu(coarse.params, nu), with_nu(fines[0].params, nu)))
+        params_of.append((with_(coarse.params, condition), with_(fines[0].params, condition)))
         reference.append(np.mean(np.stack([np.asarray(u) for u in fields]), 0))
-    speed = float(np.abs(np.asarray(coarse.state.velocity)).max()) or 1.0
+    if speed is None:
+        speed = float(np.abs(np.asarray(coarse.state.velocity)).max())
+        if speed == 0.0:
+            g = float(np.linalg.norm(np.asarray(coarse.params.gravity)))
+            speed = float(np.sqrt(g * (probe_box[-1][1] - probe_box[-1][0]))) or 1.0
     return Problem(
         coarse=coarse,
         fine=fines[0],
         ratio=int(ratio),
         dt=dt,
         probes=probes,
-        conditions=tuple(conditions),
+        conditions=tuple(params_of),
         reference=np.stack(reference),
-        speed=speed,
+        speed=float(speed),
     )
 
 
@@ -207,9 +260,9 @@ class Corrector(eqx.Module):
         mask = (idx < n) & (r[..., 0] < 1.0)
         dv = (v[:, None, :] - v[senders]) / speed
         edge = jnp.where(mask[..., None], jnp.concatenate([dr, r, dv], -1), 0.0)
-        types = jnp.zeros(n, jnp.int32)
-        out = self.gns(v / speed, types, edge, senders, mask)
         fluid = (state.kind == Kind.FLUID)[:, None]
+        types = jnp.where(fluid[:, 0], 0, 1).astype(jnp.int32)  # fluid 0, wall 1
+        out = self.gns(v / speed, types, edge, senders, mask)
         return jnp.where(fluid, self.scale * out, 0.0), neighbors
 
 
