@@ -428,7 +428,7 @@ def _run_chunk_growing(carry, dt, params, model, save_every, n_frames, extra):
         old = capacity(neighbors.search)
         # grow on every retry: the chunk's start positions may need less room than the
         # positions where it overflowed
-        extra[0] = max(extra[0] + old // 8, 2)
+        extra[0] = max(extra[0] + old // 2, 2)
         neighbors = build_neighbors(
             state, model, extra_capacity=extra[0], compact_rows=True, margin=NEIGHBOR_MARGIN
         )
