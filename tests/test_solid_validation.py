@@ -11,9 +11,11 @@ Reference numbers copied from VALIDATION.md ("Solid cases"):
 
 Resolutions are the coarsest that meet the tolerances (docs/validation_solid.md has the
 convergence tables); the runs are float32, as a user runs them.  The plate period error is
-4.1 % at H/dx = 12.  CSM3 at H/dx = 12 (root notch filled, ``fill_root=True``): mean
-+7.3 %, amplitude +5.0 %, frequency -3.3 %; the tighter targets of issue 14 (2 / 3 /
-1.5 %) are not met at <= 17 particles across (+5.3 % / +2.8 % at 16), see the docs.
+4.1 % at H/dx = 12.  CSM3 with the cell-centred set-up at H/dx = 12 (root notch filled,
+``fill_root=True``): mean +7.3 %, amplitude +5.0 %, frequency -3.3 %; it does not meet the
+tighter targets of issue 14 (2 / 3 / 1.5 %) at <= 17 particles across (+5.3 % / +2.8 % at
+16).  The default set-up (particles on the faces, embedded root) meets them at 17 across,
+see the docs.
 """
 
 from __future__ import annotations

@@ -122,8 +122,8 @@ def csm3(resolutions, t_end, placement, cfl, reference):
         axes[0].plot(ref[sel, 0], 1e3 * ref[sel, 2], "k--", label="Turek & Hron (FEM)")
         axes[1].plot(ref[sel, 0], 1e3 * ref[sel, 1], "k--", label="Turek & Hron (FEM)")
     for n, t, u in curves:
-        axes[0].plot(t, 1e3 * u[:, 1], label=f"SPH, H/dx = {n}")
-        axes[1].plot(t, 1e3 * u[:, 0], label=f"SPH, H/dx = {n}")
+        axes[0].plot(t, 1e3 * u[:, 1], label=f"SPH, {n} particles across")
+        axes[1].plot(t, 1e3 * u[:, 0], label=f"SPH, {n} particles across")
     axes[0].set(ylabel="tip u_y (mm)", title="Turek-Hron CSM3")
     axes[1].set(xlabel="t (s)", ylabel="tip u_x (mm)")
     axes[0].legend()
