@@ -155,3 +155,6 @@ def test_turek_hron_default_is_the_reference_setup(small_beam):
 
     assert free_in_cylinder(case) > 0
     assert free_in_cylinder(old) == 0
+    # a spacing maps onto n rows with H / (n - 1) between them
+    by_spacing = sphjax.cases.get("turek_hron_csm", dx=0.02 / 4)
+    assert by_spacing.info["n"] == 5 and by_spacing.info["dx"] == pytest.approx(0.005)

@@ -450,6 +450,7 @@ def turek_hron_csm(
     model = _solid_model(kernel, h, domain, penalty_alpha is not None)
     info = dict(
         n=n,
+        spacings=n - 1 if surface else n,  # dx = 0.02 / spacings
         young_modulus=E,
         cylinder_centre=(0.2, 0.2),
         cylinder_radius=radius,
