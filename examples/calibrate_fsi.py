@@ -45,12 +45,20 @@ def make_observables(case, n_steps=N_STEPS, save_every=SAVE_EVERY):
     return observables
 
 
-def run(n=N, max_iterations=MAX_ITERATIONS, seed=SEED, verbose=True):
-    case = hydrostatic_fsi_plate(n=n, length=LENGTH, depth=DEPTH, young_modulus=TRUE_E)
-    observables = make_observables(case)
+def observe(case, n_steps=N_STEPS, save_every=SAVE_EVERY, noise=NOISE, seed=SEED):
+    """``(observables, observed)``: the model's mid-span deflection series as a function of
+    the parameters, and the twin run's series at ``case.params`` with Gaussian noise of
+    ``noise`` times its RMS."""
+    observables = make_observables(case, n_steps, save_every)
     clean = np.asarray(jax.jit(observables)(case.params))
     rms = np.sqrt(np.mean(clean**2))
-    observed = clean + NOISE * rms * np.random.default_rng(seed).standard_normal(clean.shape)
+    observed = clean + noise * rms * np.random.default_rng(seed).standard_normal(clean.shape)
+    return observables, observed
+
+
+def run(n=N, max_iterations=MAX_ITERATIONS, seed=SEED, verbose=True, n_steps=N_STEPS):
+    case = hydrostatic_fsi_plate(n=n, length=LENGTH, depth=DEPTH, young_modulus=TRUE_E)
+    observables, observed = observe(case, n_steps=n_steps, seed=seed)
     result = calibrate(
         observables,
         observed,
