@@ -25,10 +25,11 @@ import math
 import jax
 import jax.numpy as jnp
 import numpy as np
-from jax_md import partition
-from jax_md import space as jmd_space
 
+from sphjax._jax_md import modules as _jax_md_modules
 from sphjax.core.space import minimum_image
+
+partition, jmd_space = _jax_md_modules("partition", "space")
 
 _CELL_LIST_FNS: dict = {}
 
