@@ -171,15 +171,7 @@ def _fluid_rows(fluid, stress):
 def fluid_fluid(system: FluidSystem, fluid, _other, _fluid, pairs, ctx):
     """Fluid-fluid momentum (eq. 10, viscosities, transport velocity)."""
     stress = system.transport_velocity is not None and "dv" in fluid
-    summand = functools.partial(
-        _hydrodynamic_summand,
-        h=ctx.geometry.smoothing_length,
-        artificial=system.artificial_viscosity,
-        morris=system.physical_viscosity,
-        stress=stress,
-        shift=system.transport_velocity is not None,
-        viscous=True,
-    )
+    summand = _fluid_momentum(system, ctx.geometry.smoothing_length, stress, viscous=True)
     rows = _fluid_rows(fluid, stress)
     return ctx.pair_sum(
         summand, rows, None, pairs, _fluid_shared(system, ctx), weight="m", parity=-1
@@ -189,14 +181,8 @@ def fluid_fluid(system: FluidSystem, fluid, _other, _fluid, pairs, ctx):
 def fluid_wall(system: FluidSystem, fluid, wall_system: WallSystem, wall, pairs, ctx):
     """Fluid-wall momentum: eq. 10 against the walls' extrapolated pressure and density;
     viscous terms with the extrapolated velocity for no-slip walls only."""
-    summand = functools.partial(
-        _hydrodynamic_summand,
-        h=ctx.geometry.smoothing_length,
-        artificial=system.artificial_viscosity,
-        morris=system.physical_viscosity,
-        stress=False,
-        shift=system.transport_velocity is not None,
-        viscous=wall_system.boundary.no_slip,
+    summand = _fluid_on_boundary(
+        system, ctx.geometry.smoothing_length, wall_system.boundary.no_slip
     )
     cols = {"x": wall["x"], "m": wall["m"], "rho": wall["rho"], "p": wall["p"]}
     cols["vv"] = wall["v_viscous"]
@@ -239,17 +225,24 @@ def solid_solid(system: SolidSystem, solid, _other, _solid, pairs, ctx):
     return ctx.pair_sum(summand, rows, None, pairs, shared, weight="V", parity=-1)
 
 
-def _fluid_on_boundary(system: FluidSystem, h, no_slip):
-    """The fluid's momentum summand against boundary particles (eq. 10 and viscosities)."""
+def _fluid_momentum(system: FluidSystem, h, stress: bool, viscous: bool):
+    """The fluid's momentum summand (eq. 10 with ``system``'s viscosities and transport
+    velocity); ``stress``: with the transport-velocity stress (fluid-fluid pairs only);
+    ``viscous``: with the viscous terms (not against free-slip boundaries)."""
     return functools.partial(
         _hydrodynamic_summand,
         h=h,
         artificial=system.artificial_viscosity,
         morris=system.physical_viscosity,
-        stress=False,
+        stress=stress,
         shift=system.transport_velocity is not None,
-        viscous=no_slip,
+        viscous=viscous,
     )
+
+
+def _fluid_on_boundary(system: FluidSystem, h, no_slip):
+    """The fluid's momentum summand against boundary particles (walls, solids)."""
+    return _fluid_momentum(system, h, stress=False, viscous=no_slip)
 
 
 def fluid_solid(system: FluidSystem, fluid, solid_system: SolidSystem, solid, pairs, ctx):

@@ -62,9 +62,9 @@ class TaitEOS:
 
     gamma: float = 7.0
 
-    def pressure(self, density, fluid):
-        return tait_pressure(
-            density,
+    def _constants(self, fluid):
+        """``(rho0, c0, gamma, p0, p_background)`` of eq. 12 from the fluid's Params."""
+        return (
             fluid.reference_density,
             fluid.sound_speed,
             self.gamma,
@@ -72,35 +72,28 @@ class TaitEOS:
             fluid.background_pressure,
         )
 
+    def pressure(self, density, fluid):
+        return tait_pressure(density, *self._constants(fluid))
+
     def density(self, pressure, fluid):
-        return tait_density(
-            pressure,
-            fluid.reference_density,
-            fluid.sound_speed,
-            self.gamma,
-            fluid.reference_pressure,
-            fluid.background_pressure,
-        )
+        return tait_density(pressure, *self._constants(fluid))
 
 
 @dataclasses.dataclass(frozen=True)
 class LinearEOS:
     """Linear equation of state ``p = c0^2 (rho - rho0) + p0 - p_background``."""
 
-    def pressure(self, density, fluid):
-        return linear_pressure(
-            density,
+    def _constants(self, fluid):
+        """``(rho0, c0, p0, p_background)`` from the fluid's Params."""
+        return (
             fluid.reference_density,
             fluid.sound_speed,
             fluid.reference_pressure,
             fluid.background_pressure,
         )
 
+    def pressure(self, density, fluid):
+        return linear_pressure(density, *self._constants(fluid))
+
     def density(self, pressure, fluid):
-        return linear_density(
-            pressure,
-            fluid.reference_density,
-            fluid.sound_speed,
-            fluid.reference_pressure,
-            fluid.background_pressure,
-        )
+        return linear_density(pressure, *self._constants(fluid))
