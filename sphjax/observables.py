@@ -252,9 +252,9 @@ def momentum_budget(trajectory, case: Case) -> dict:
     of the forces on them apart from gravity (trapezoidal rule over the saved frames;
     ``a_a`` the acceleration the state holds).  Fluid-solid pair forces cancel in the sum
     (equal and opposite), so ``J`` is the impulse of the walls and the clamp; along a
-    direction without gravity ``P(t) - P(0) = J(t)`` (the kick-drift-kick step is the
-    trapezoidal rule: exact with every step saved).  Returns numpy ``time``,
-    ``momentum``, ``impulse`` and ``wall_force`` (``[T, d]``)."""
+    direction without gravity ``P(t) - P(0) = J(t)``, up to the quadrature error of the
+    frames' spacing (the kick-drift-kick step itself applies ``(a_n + a_{n+1}) dt / 2``).
+    Returns numpy ``time``, ``momentum``, ``impulse`` and ``wall_force`` (``[T, d]``)."""
     s = _states(trajectory)
     moving = np.asarray(_of_kinds(s, MOVING))
     m = np.asarray(s.mass)
