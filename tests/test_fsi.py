@@ -324,14 +324,14 @@ OBSTACLE_CI = dict(column_width=0.036, plate_length=0.03)
 
 @pytest.fixture(scope="module")
 def obstacle_run(tmp_path_factory):
-    """``sphjax run dam_break_elastic_obstacle`` at CI size past the impact, every 2nd
+    """``sphjax run dam_break_elastic_obstacle`` at CI size past the impact, every 3rd
     step saved; returns (trajectory, case)."""
     from sphjax.cli import main
 
     out = tmp_path_factory.mktemp("obstacle") / "obstacle.h5"
-    args = ["run", "dam_break_elastic_obstacle", "--n", "2", "--t-end", "0.12", "--quiet"]
+    args = ["run", "dam_break_elastic_obstacle", "--n", "2", "--t-end", "0.11", "--quiet"]
     args += [a for k, v in OBSTACLE_CI.items() for a in ("--case-arg", f"{k}={v}")]
-    assert main([*args, "--save-every", "2", "--out", str(out)]) == 0
+    assert main([*args, "--save-every", "3", "--out", str(out)]) == 0
     trajectory, _ = sphjax.read_trajectory(out)
     return trajectory, sphjax.cases.dam_break_elastic_obstacle(n=2, **OBSTACLE_CI)
 
@@ -351,7 +351,7 @@ def test_obstacle_budgets_through_the_impact(obstacle_run):
       value by more than 1e-3 of the potential energy released over the run (the
       kick-drift-kick step's bounded energy error on the plate's initial sag under
       gravity; measured 1.6e-4), and at least 10 % of the released energy is dissipated
-      by the end (measured 81 %: at 6 particles across the column the artificial
+      by the end (measured 73 %: at 6 particles across the column the artificial
       viscosity, ``alpha h c0 / 8 ~ 2e-3 m^2/s``, makes the flow's Reynolds number about
       30);
     * momentum: fluid-solid forces cancel and gravity is vertical, so the horizontal
