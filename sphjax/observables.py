@@ -4,19 +4,27 @@
 * :func:`probe_pressure` — the pressure the fluid exerts at a probe point (a wall sensor);
 * :func:`poiseuille_centreline_speed` — the channel's centre-line speed;
 * :func:`tip_displacement` — the displacement of a solid's tip probe (plate, Turek-Hron);
-* :func:`oscillation_stats` — mean, amplitude and period of a signal.
+* :func:`oscillation_stats` — mean, amplitude and period of a signal;
+* :func:`energy_budget` — kinetic, gravitational, fluid internal (Tait) and elastic strain
+  energies of a coupled run (:func:`kinetic_energy`, :func:`gravitational_energy`,
+  :func:`tait_internal_energy`, :func:`strain_energy`);
+* :func:`momentum_budget` — total momentum of the moving particles against the impulse of
+  the forces on them.
 
 Each reads the probes the case put in ``case.info``.
 """
 
 from __future__ import annotations
 
+import jax
 import jax.numpy as jnp
 import numpy as np
 
 from sphjax.core import kernels
 from sphjax.core.case import Case
 from sphjax.core.state import Kind
+from sphjax.physics.fluid.system import FluidSystem
+from sphjax.physics.solid.material import green_lagrange_strain, lame_constants
 
 
 def poiseuille_centreline_speed(state, case: Case) -> float:
@@ -124,3 +132,138 @@ def oscillation_stats(times, signal) -> dict:
         period=period,
         frequency=1.0 / period if spacings else float("nan"),
     )
+
+
+def _states(trajectory):
+    return getattr(trajectory, "states", trajectory)
+
+
+def _of_kinds(states, kinds):
+    kind = states.kind
+    return jnp.any(jnp.stack([kind == k for k in kinds]), axis=0)
+
+
+#: the particles that move: fluid and (free) solid
+MOVING = (Kind.FLUID, Kind.SOLID)
+
+
+def kinetic_energy(trajectory, kinds=MOVING):
+    """Kinetic energy ``K = sum_a m_a |v_a|^2 / 2`` over the particles of ``kinds``,
+    ``[T]`` (or a scalar for one State); jax.numpy."""
+    s = _states(trajectory)
+    speed2 = jnp.sum(s.velocity**2, axis=-1)
+    return 0.5 * jnp.sum(jnp.where(_of_kinds(s, kinds), s.mass * speed2, 0.0), axis=-1)
+
+
+def gravitational_energy(trajectory, case: Case, kinds=MOVING):
+    """Gravitational potential energy ``V = -sum_a m_a g . x_a`` (zero at the origin) over
+    the particles of ``kinds``, ``[T]``; its decrease is the work of gravity."""
+    s = _states(trajectory)
+    g = jnp.asarray(case.params.gravity, s.position.dtype)
+    height = -jnp.sum(s.position * g, axis=-1)
+    return jnp.sum(jnp.where(_of_kinds(s, kinds), s.mass * height, 0.0), axis=-1)
+
+
+def tait_internal_energy(trajectory, case: Case):
+    """Internal (compression) energy of a weakly compressible fluid with the Tait equation
+    of state (formulation eq. 12, ``p = B ((rho / rho0)^gamma - 1)``, ``B = rho0 c0^2 /
+    gamma``), ``U_f = sum_f m_f e(rho_f)`` with ``de = p / rho^2 drho``:
+
+        e(rho) = B (rho^(gamma-1) - rho0^(gamma-1)) / ((gamma - 1) rho0^gamma)
+                 + B (1 / rho - 1 / rho0),
+
+    zero at ``rho0``.  With continuity density (eq. 11) and the symmetric pressure term
+    (eq. 10) the fluid's pressure work on itself is exchanged with this energy exactly
+    (Monaghan 2005, section 5); ``[T]``."""
+    s = _states(trajectory)
+    fluid = case.params.fluid
+    gamma = case.model.system(FluidSystem).equation_of_state.gamma
+    rho0, c0 = fluid.reference_density, fluid.sound_speed
+    B = rho0 * c0**2 / gamma
+    rho = jnp.where(s.kind == Kind.FLUID, s.density, rho0)
+    e = B * (rho ** (gamma - 1) - rho0 ** (gamma - 1)) / ((gamma - 1) * rho0**gamma) + B * (
+        1.0 / rho - 1.0 / rho0
+    )
+    return jnp.sum(jnp.where(s.kind == Kind.FLUID, s.mass * e, 0.0), axis=-1)
+
+
+def strain_energy(trajectory, case: Case):
+    """Elastic strain energy of the TLSPH solid, ``U_s = sum_a V0_a psi(F_a)`` over its
+    free and clamped particles, with the St Venant-Kirchhoff energy density
+
+        psi(F) = lambda / 2 tr(E)^2 + mu E : E,     E = (F^T F - I) / 2   (eqs. 17-19),
+
+    ``F_a`` from eq. 16 with the corrected kernel gradient of eq. 15 on the reference
+    configuration (the case's kernel and smoothing length; all pairs of the solid, which
+    is small).  The solid's momentum equation (eq. 14) is the variational discretisation
+    of this energy: its elastic forces are ``-dU_s / dx_a``.  ``[T]`` (or a scalar)."""
+    s = _states(trajectory)
+    model = case.model
+    solid = np.flatnonzero(np.asarray(case.state.kind) >= Kind.SOLID)
+    X = jnp.asarray(case.state.reference_position)[solid]
+    V = jnp.asarray(case.state.volume)[solid]
+    dX = X[:, None, :] - X[None, :, :]
+    R = jnp.linalg.norm(dX, axis=-1)
+    near = (R < model.cutoff) & (R > 0)
+    grad = kernels.grad_W(model.kernel, dX, R, model.smoothing_length, model.dim)
+    grad = jnp.where(near[..., None], grad, 0.0)
+    moment = -jnp.einsum("b,abi,abj->aij", V, grad, dX)  # eq. 15
+    corrected = jnp.einsum("aij,abj->abi", jnp.linalg.inv(moment), grad)
+    lam, mu = lame_constants(case.params.solid.young_modulus, case.params.solid.poisson_ratio)
+
+    def energy(x):
+        dx = x[:, None, :] - x[None, :, :]
+        F = -jnp.einsum("b,abi,abj->aij", V, dx, corrected)  # eq. 16
+        E = green_lagrange_strain(F)
+        trace = jnp.trace(E, axis1=-2, axis2=-1)
+        psi = 0.5 * lam * trace**2 + mu * jnp.sum(E * E, axis=(-2, -1))
+        return jnp.sum(V * psi)
+
+    x = jnp.asarray(s.position)[..., solid, :]
+    if x.ndim == 2:
+        return energy(x)
+    return jax.jit(jax.vmap(energy))(x)
+
+
+def energy_budget(trajectory, case: Case) -> dict:
+    """Energies of a fluid-structure run, each ``[T]`` (numpy): ``fluid_kinetic``,
+    ``fluid_potential`` (gravity), ``fluid_internal`` (:func:`tait_internal_energy`),
+    ``solid_kinetic``, ``solid_potential``, ``solid_strain`` (:func:`strain_energy`), and
+    ``total``, their sum.  Walls and clamped particles do not move, so in the continuum
+    they do no work and ``total`` is conserved but for the scheme's dissipation
+    (artificial viscosity, no-slip walls, delta-SPH's density diffusion); gravity's work
+    is in the potentials."""
+    out = dict(
+        fluid_kinetic=kinetic_energy(trajectory, (Kind.FLUID,)),
+        fluid_potential=gravitational_energy(trajectory, case, (Kind.FLUID,)),
+        fluid_internal=tait_internal_energy(trajectory, case),
+        solid_kinetic=kinetic_energy(trajectory, (Kind.SOLID,)),
+        solid_potential=gravitational_energy(trajectory, case, (Kind.SOLID,)),
+        solid_strain=strain_energy(trajectory, case),
+    )
+    out = {k: np.asarray(v, float) for k, v in out.items()}
+    out["total"] = sum(out.values())
+    return out
+
+
+def momentum_budget(trajectory, case: Case) -> dict:
+    """Total linear momentum ``P = sum_a m_a v_a`` of the moving (fluid and free solid)
+    particles, ``[T, d]``, against the impulse ``J(t) = int_0^t sum_a m_a (a_a - g) dt``
+    of the forces on them apart from gravity (trapezoidal rule over the saved frames;
+    ``a_a`` the acceleration the state holds).  Fluid-solid pair forces cancel in the sum
+    (equal and opposite), so ``J`` is the impulse of the walls and the clamp; along a
+    direction without gravity ``P(t) - P(0) = J(t)``, up to the quadrature error of the
+    frames' spacing (the kick-drift-kick step itself applies ``(a_n + a_{n+1}) dt / 2``).
+    Returns numpy ``time``, ``momentum``, ``impulse`` and ``wall_force`` (``[T, d]``)."""
+    s = _states(trajectory)
+    moving = np.asarray(_of_kinds(s, MOVING))
+    m = np.asarray(s.mass)
+    v = np.asarray(s.velocity)
+    a = np.asarray(s.acceleration) - np.asarray(case.params.gravity)
+    weight = np.where(moving, m, 0.0)[..., None]
+    momentum = np.sum(weight * v, axis=-2)
+    force = np.sum(weight * a, axis=-2)
+    t = np.asarray(s.time, float)
+    steps = np.diff(t)[:, None] * 0.5 * (force[1:] + force[:-1])
+    impulse = np.concatenate([np.zeros_like(force[:1]), np.cumsum(steps, axis=0)])
+    return dict(time=t, momentum=momentum, impulse=impulse, wall_force=force)

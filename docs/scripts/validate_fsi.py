@@ -13,20 +13,44 @@ over the second half of the run and ``(max + min) / 2`` over it, divided by the 
 column's weight reaches the plate) from the plate's own discretisation error.
 ``--substeps`` runs the coupled plate once per value (split integration,
 ``SolidSystem.substeps``; ``auto``: as many solid steps as fit in the fluid's).
+
+    python docs/scripts/validate_fsi.py --case obstacle --n 2 --t-end 1.0
+    python docs/scripts/validate_fsi.py --case gate --n 2 --t-end 0.4
+
+``--case obstacle``: the dam break against an elastic plate (``dam_break_elastic_obstacle``):
+the plate top's displacement against the published curves
+(``docs/data/elastic_plate_dam_break_tip_displacement.csv``), the energy budget
+(:func:`sphjax.observables.energy_budget`) and the momentum budget
+(:func:`sphjax.observables.momentum_budget`); figure ``docs/figures/fsi_obstacle.png``,
+numbers ``docs/figures/fsi_obstacle.json``.  ``--case gate``: the elastic gate's free end
+against Antoci et al.'s experiment (``docs/data/antoci_2007_gate_tip_displacement.csv``);
+``docs/figures/fsi_gate.png`` and ``.json``.
 """
 
 from __future__ import annotations
 
 import argparse
+import csv
 import json
+import pathlib
 import time
 
 import jax
 import numpy as np
 
 import sphjax
-from sphjax.cases.fsi import hydrostatic_fsi_plate, midspan_deflection
+from sphjax import observables
+from sphjax.cases.fsi import (
+    dam_break_elastic_obstacle,
+    elastic_gate_dam_break,
+    hydrostatic_fsi_plate,
+    midspan_deflection,
+)
 from sphjax.core.state import Kind
+
+ROOT = pathlib.Path(__file__).resolve().parents[2]
+DATA = ROOT / "docs" / "data"
+FIGURES = ROOT / "docs" / "figures"
 
 
 def dry_case(case):
@@ -78,16 +102,195 @@ def measure(case, t_end):
     )
 
 
+def read_series(path):
+    """``{series: (time, value)}`` from a ``series,time,value`` csv with ``#`` comments."""
+    rows = [r for r in csv.reader(open(path)) if r and not r[0].startswith("#")][1:]
+    out = {}
+    for name, t, v in rows:
+        out.setdefault(name, ([], []))
+        out[name][0].append(float(t))
+        out[name][1].append(float(v))
+    return {k: (np.array(t), np.array(v)) for k, (t, v) in out.items()}
+
+
+def curve_error(t, u, t_ref, u_ref):
+    """RMS of ``u - u_ref`` at the reference times (``u`` interpolated linearly), over the
+    reference times inside the run, divided by ``max |u_ref|``."""
+    inside = (t_ref >= t[0]) & (t_ref <= t[-1])
+    diff = np.interp(t_ref[inside], t, u) - u_ref[inside]
+    return float(np.sqrt(np.mean(diff**2)) / np.max(np.abs(u_ref)))
+
+
+def peak(t, u):
+    i = int(np.argmax(u))
+    return float(u[i]), float(t[i])
+
+
+def run_coupled(case, t_end, frames):
+    n_steps = int(round(t_end / case.dt))
+    save_every = max(1, n_steps // frames)
+    start, cpu = time.perf_counter(), time.process_time()
+    traj = sphjax.simulate(case, n_steps=n_steps, save_every=save_every)
+    jax.block_until_ready(traj.states.position)
+    cost = dict(
+        steps=n_steps,
+        dt=case.dt,
+        particles=case.n_particles,
+        wall_s=round(time.perf_counter() - start, 1),
+        cpu_s=round(time.process_time() - cpu, 1),
+    )
+    return traj, cost
+
+
+def obstacle(n, t_end, frames):
+    """The dam break against the elastic plate: tip curve, energy and momentum budgets."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    jax.config.update("jax_enable_x64", True)
+    case = dam_break_elastic_obstacle(n=n)
+    traj, cost = run_coupled(case, t_end, frames)
+    t = np.asarray(traj.states.time)
+    tip = np.asarray(observables.tip_displacement(traj, case))
+    energy = observables.energy_budget(traj, case)
+    budget = observables.momentum_budget(traj, case)
+    finite = bool(np.all(np.isfinite(np.asarray(traj.states.position))))
+    released = energy["fluid_potential"][0] - energy["fluid_potential"].min()
+    refs = read_series(DATA / "elastic_plate_dam_break_tip_displacement.csv")
+    peak_u, peak_t = peak(t, tip[:, 0])
+    row = dict(case="dam_break_elastic_obstacle", n=n, dx=case.info["dx"], t_end=t_end, **cost)
+    row.update(
+        finite=finite,
+        tip_peak_ux=peak_u,
+        tip_peak_time=peak_t,
+        tip_ux_end=float(tip[-1, 0]),
+        references={
+            k: dict(
+                peak_ux=peak(*v)[0],
+                peak_time=peak(*v)[1],
+                curve_error=curve_error(t, tip[:, 0], *v),
+            )
+            for k, v in refs.items()
+        },
+        energy_initial=float(energy["total"][0]),
+        potential_released_max=float(released),
+        energy_change_max=float(np.max(energy["total"] - energy["total"][0])),
+        energy_change_end=float(energy["total"][-1] - energy["total"][0]),
+        strain_energy_max=float(energy["solid_strain"].max()),
+        fluid_kinetic_max=float(energy["fluid_kinetic"].max()),
+        momentum_x_change_max=float(
+            np.max(np.abs(budget["momentum"][:, 0] - budget["momentum"][0, 0]))
+        ),
+        momentum_x_minus_impulse_max=float(
+            np.max(
+                np.abs(
+                    budget["momentum"][:, 0] - budget["momentum"][0, 0] - budget["impulse"][:, 0]
+                )
+            )
+        ),
+        series=dict(
+            time=t[:: max(1, len(t) // 100)].tolist(),
+            tip_ux=tip[:: max(1, len(t) // 100), 0].tolist(),
+        ),
+    )
+    fig, ax = plt.subplots(1, 3, figsize=(15, 4))
+    for k, (tr, ur) in refs.items():
+        ax[0].plot(tr, 1e3 * ur, "--", lw=1, label=k)
+    ax[0].plot(t, 1e3 * tip[:, 0], "k", lw=2, label=f"sphjax, n = {n}")
+    ax[0].set(xlabel="t (s)", ylabel="tip ux (mm)", title="plate top, horizontal")
+    ax[0].legend(fontsize=7)
+    E0 = energy["total"][0]
+    for k in (
+        "fluid_kinetic",
+        "fluid_potential",
+        "fluid_internal",
+        "solid_kinetic",
+        "solid_strain",
+    ):
+        ax[1].plot(t, energy[k] - energy[k][0], label=k)
+    ax[1].plot(t, energy["total"] - E0, "k", lw=2, label="total")
+    ax[1].set(xlabel="t (s)", ylabel="E(t) - E(0) (J/m)", title="energy budget")
+    ax[1].legend(fontsize=7)
+    ax[2].plot(
+        t, budget["momentum"][:, 0] - budget["momentum"][0, 0], "k", lw=2, label="P_x(t) - P_x(0)"
+    )
+    ax[2].plot(t, budget["impulse"][:, 0], "r--", label="impulse of walls and clamp")
+    ax[2].set(xlabel="t (s)", ylabel="kg m/s per m", title="horizontal momentum")
+    ax[2].legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(FIGURES / "fsi_obstacle.png", dpi=110)
+    return row
+
+
+def gate(n, t_end, frames, substeps):
+    """The elastic gate's free end against Antoci et al.'s experiment."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    case = elastic_gate_dam_break(n=n, substeps=substeps)
+    traj, cost = run_coupled(case, t_end, frames)
+    t = np.asarray(traj.states.time)
+    tip = np.asarray(observables.tip_displacement(traj, case))
+    exp = read_series(DATA / "antoci_2007_gate_tip_displacement.csv")
+    row = dict(case="elastic_gate_dam_break", n=n, dx=case.info["dx"], t_end=t_end, **cost)
+    row["substeps"] = case.info["substeps"]
+    row["finite"] = bool(np.all(np.isfinite(tip)))
+    fig, ax = plt.subplots(1, 2, figsize=(10, 4))
+    for j, key in enumerate(("ux", "uy")):
+        te, ue = exp[key]
+        pk, pt = peak(t, tip[:, j])
+        pke, pte = peak(te, ue)
+        row[key] = dict(
+            peak=pk,
+            peak_time=pt,
+            experiment_peak=pke,
+            experiment_peak_time=pte,
+            peak_error=(pk - pke) / pke,
+            curve_error=curve_error(t, tip[:, j], te, ue),
+        )
+        ax[j].plot(te, 1e3 * ue, "ko", label="Antoci et al. 2007 (experiment)")
+        ax[j].plot(t, 1e3 * tip[:, j], "b", label=f"sphjax, n = {n}")
+        ax[j].set(xlabel="t (s)", ylabel=f"{key} (mm)", title=f"gate free end, {key}")
+        ax[j].legend(fontsize=8)
+    row["series"] = dict(
+        time=t[:: max(1, len(t) // 100)].tolist(),
+        tip=tip[:: max(1, len(t) // 100)].tolist(),
+    )
+    fig.tight_layout()
+    fig.savefig(FIGURES / "fsi_gate.png", dpi=110)
+    return row
+
+
 def main(argv=None):
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    p.add_argument("--case", choices=("plate", "obstacle", "gate"), default="plate")
+    p.add_argument("--t-end", type=float, default=None)
+    p.add_argument("--frames", type=int, default=400)
     p.add_argument("--n", type=int, nargs="+", default=[2, 3, 4])
     p.add_argument("--depth", type=float, default=0.5)
     p.add_argument("--periods", type=float, default=8.0)
     p.add_argument("--dry-only", action="store_true")
     p.add_argument("--no-dry", action="store_true")
     p.add_argument("--substeps", nargs="+", default=["1"])
-    p.add_argument("--out", required=True)
+    p.add_argument("--out", default=None)
     args = p.parse_args(argv)
+    if args.case in ("obstacle", "gate"):
+        n = args.n[0]
+        if args.case == "obstacle":
+            row = obstacle(n, args.t_end or 1.0, args.frames)
+        else:
+            k = args.substeps[0]
+            row = gate(n, args.t_end or 0.4, args.frames, k if k == "auto" else int(k))
+        out = pathlib.Path(args.out or FIGURES / f"fsi_{args.case}.json")
+        out.write_text(json.dumps(row, indent=1) + "\n")
+        print(json.dumps({k: v for k, v in row.items() if k != "series"}, indent=1))
+        return
+    if args.out is None:
+        p.error("--out is required with --case plate")
     for n in args.n:
         case = hydrostatic_fsi_plate(n=n, depth=args.depth)
         t_end = args.periods * case.info["dry_period"]

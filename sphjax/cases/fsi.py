@@ -5,6 +5,8 @@
   against Euler-Bernoulli theory (:func:`plate_deflection_reference`).
 * :func:`elastic_gate_dam_break` — a water column held by a rubber gate clamped at its top
   (Antoci, Gallati & Sibilla 2007).
+* :func:`dam_break_elastic_obstacle` — a dam break hitting an elastic plate fixed to the
+  floor (Walhorn et al. 2005; Zhan et al. 2019).
 
 Each returns a :class:`sphjax.Case` whose model is ``(FluidSystem, WallSystem,
 SolidSystem)``: the solid's particles are moving boundary particles for the fluid and the
@@ -400,7 +402,9 @@ def dam_break_elastic_obstacle(
     ``0.012`` thick and ``0.08`` high standing on the floor at ``x = 2L``, clamped below
     the floor (clamped particles in place of the floor's wall particles under it).
     ``E = 1 MPa``, ``nu = 0``, ``rho_s = 2500``.  The plate's top (``info["tip_indices"]``,
-    :func:`sphjax.cases.tip_displacement`) is the probe.  Not validated yet.
+    :func:`sphjax.cases.tip_displacement`) is the probe; its energy and momentum budgets
+    are :func:`sphjax.observables.energy_budget` and
+    :func:`sphjax.observables.momentum_budget` (docs/validation_fsi.md).
 
     Args:
       n: particles across the plate thickness (``dx = thickness / n``).
