@@ -51,7 +51,7 @@ def _rms(a):
         ("duct_poiseuille_3d", 4, {}),
         ("dam_break_3d", 4, {}),
         ("spheric_dam_break_3d", 4, {}),
-        ("hydrostatic_fsi_plate_3d", 4, dict(length=0.2, depth=0.05)),
+        ("hydrostatic_fsi_plate_3d", 4, dict(length=0.2, depth=0.05, substeps=1)),
     ],
 )
 def test_3d_cases_are_registered_and_three_dimensional(name, n, kwargs):
