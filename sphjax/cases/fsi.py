@@ -375,8 +375,10 @@ def hydrostatic_fsi_plate_3d(
     t_end: float | None = None,
     substeps: int | str = "auto",
 ) -> Case:
-    """:func:`hydrostatic_fsi_plate` extruded across a tank: a water column resting on an
-    elastic plate clamped at both ends, periodic along the span.
+    """A water column resting on an elastic plate clamped at both ends, in 3D: the
+    hydrostatic plate extruded across a tank, periodic along its span.
+
+    :func:`hydrostatic_fsi_plate` in three dimensions.
 
     The plate ``[0, L] x [0, W) x [-t, 0]`` (x along the plate, y across it, z up;
     gravity along ``-z``), clamped particles beyond both ends, the fluid ``[0, L] x [0, W)
