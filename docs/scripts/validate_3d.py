@@ -7,10 +7,12 @@
     python docs/scripts/validate_3d.py dam --n 8                # --t-end in T = t sqrt(2g/L)
     python docs/scripts/validate_3d.py cantilever --n 4 6 8
     python docs/scripts/validate_3d.py spheric --n 8 --t-end 1.5   # SPHERIC benchmark 2
+    python docs/scripts/validate_3d.py fsi --n 2 3 --x64   # plate under water, 3D against 2D
     python docs/scripts/validate_3d.py figures        # docs/img/*_3d.png from the JSON file
 
 Each run is stored in the JSON file under its own key (re-running replaces it) and printed
-as a Markdown table row; docs/validation_3d.md holds the tables.  Float32, as a user runs.
+as a Markdown table row; docs/validation_3d.md holds the tables.  Float32, as a user runs
+(``--x64``: float64).
 """
 
 from __future__ import annotations
@@ -20,6 +22,7 @@ import json
 import pathlib
 import time
 
+import jax
 import numpy as np
 
 import sphjax
@@ -304,6 +307,50 @@ def _spheric_table(record, gauges=("H2", "H3", "H4")):
     return rows
 
 
+#: the small hydrostatic plate of tests/test_fsi.py (0.4 m, 0.05 m thick, rho_s = 800,
+#: under 0.2 m of water)
+SMALL_PLATE = dict(length=0.4, depth=0.2, solid_density=800.0)
+
+
+def fsi(n, periods, length=None, depth=None):
+    """The hydrostatic plate in 3D (extruded, periodic span) and in 2D, same arguments,
+    split integration ``"auto"``: static mid-span deflection ``(max + min) / 2`` over the
+    second half of ``periods`` dry periods, against each other and Euler-Bernoulli."""
+    kw = dict(SMALL_PLATE, n=n, substeps="auto")
+    if length is not None:
+        kw["length"] = length
+    if depth is not None:
+        kw["depth"] = depth
+    record = dict(kw, x64=bool(jax.config.jax_enable_x64))
+    for name in ("hydrostatic_fsi_plate", "hydrostatic_fsi_plate_3d"):
+        t0 = time.perf_counter()
+        case = sphjax.cases.get(name, **kw)
+        n_steps = int(round(periods * case.info["dry_period"] / case.dt))
+        traj = sphjax.simulate(case, n_steps=n_steps, save_every=max(1, n_steps // 200))
+        w = np.asarray(sphjax.cases.midspan_deflection(traj, case))
+        late = w[len(w) // 2 :]
+        record[f"{case.model.dim}d"] = dict(
+            particles=case.n_particles,
+            substeps=case.info["substeps"],
+            steps=n_steps,
+            static=float(0.5 * (late.max() + late.min())),
+            mean=float(late.mean()),
+            reference=case.info["reference_deflection"],
+            wall_s=time.perf_counter() - t0,
+            times=np.asarray(traj.times).tolist(),
+            deflection=w.tolist(),
+        )
+    _store(f"fsi_plate_n{n}_L{kw['length']:g}_H{kw['depth']:g}", record)
+    a, b = record["2d"], record["3d"]
+    print(
+        f"| {n} | {kw['length']:g} / {kw['depth']:g} | {a['particles']} / {b['particles']} | "
+        f"{a['substeps']} / {b['substeps']} | {b['steps']} | {a['static']:.4e} | "
+        f"{b['static']:.4e} | {b['static'] / a['static']:.3f} | "
+        f"{a['static'] / a['reference']:.3f} / {b['static'] / b['reference']:.3f} | "
+        f"{a['wall_s']:.0f} / {b['wall_s']:.0f} |"
+    )
+
+
 def figures():
     """The figures of docs/validation_3d.md, from the stored runs (no simulation)."""
     import matplotlib
@@ -409,7 +456,8 @@ def figures():
 def main():
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument(
-        "case", choices=["abc", "tank", "duct", "dam", "cantilever", "spheric", "figures"]
+        "case",
+        choices=["abc", "tank", "duct", "dam", "cantilever", "spheric", "fsi", "figures"],
     )
     p.add_argument("--n", type=int, nargs="*", default=None)
     p.add_argument("--reynolds", type=float, default=50.0)
@@ -417,8 +465,16 @@ def main():
     p.add_argument("--lattice", action="store_true")
     p.add_argument("--width", type=float, default=1.0)
     p.add_argument("--wall-slip", default="no_slip", choices=["no_slip", "free_slip"])
+    p.add_argument("--length", type=float, default=None, help="fsi: the plate's length")
+    p.add_argument("--depth", type=float, default=None, help="fsi: the water's depth")
+    p.add_argument("--periods", type=float, default=8.0, help="fsi: dry periods")
+    p.add_argument(
+        "--x64", action="store_true", help="float64 (the plate's deflection is 1e-6 of its size)"
+    )
     p.add_argument("--dim", type=int, default=3, choices=[2, 3], help="dam: 2 for the 2D case")
     args = p.parse_args()
+    if args.x64:
+        jax.config.update("jax_enable_x64", True)
     if args.case == "abc":
         for n in args.n or [12, 16]:
             abc(n, args.reynolds, args.t_end or 0.5, args.lattice)
@@ -437,6 +493,9 @@ def main():
     elif args.case == "spheric":
         for n in args.n or [8]:
             spheric(n, args.t_end or 1.5, args.wall_slip)
+    elif args.case == "fsi":
+        for n in args.n or [2, 3]:
+            fsi(n, args.periods, args.length, args.depth)
     elif args.case == "figures":
         figures()
 

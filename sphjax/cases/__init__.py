@@ -33,6 +33,7 @@ from sphjax.cases.fsi import (
     dam_break_elastic_obstacle,
     elastic_gate_dam_break,
     hydrostatic_fsi_plate,
+    hydrostatic_fsi_plate_3d,
     midspan_deflection,
     plate_deflection_reference,
 )
@@ -68,6 +69,7 @@ CASES = {
     "dam_break_3d": dam_break_3d,
     "spheric_dam_break_3d": spheric_dam_break_3d,
     "hydrostatic_fsi_plate": hydrostatic_fsi_plate,
+    "hydrostatic_fsi_plate_3d": hydrostatic_fsi_plate_3d,
     "elastic_gate_dam_break": elastic_gate_dam_break,
     "dam_break_elastic_obstacle": dam_break_elastic_obstacle,
 }
@@ -134,6 +136,7 @@ __all__ = [
     "spheric_dam_break_3d",
     "water_height",
     "hydrostatic_fsi_plate",
+    "hydrostatic_fsi_plate_3d",
     "elastic_gate_dam_break",
     "dam_break_elastic_obstacle",
     "midspan_deflection",

@@ -3,6 +3,8 @@
 * :func:`hydrostatic_fsi_plate` — a water column resting on an elastic plate clamped at
   both ends (Fourey et al. 2017; O'Connor & Rogers 2021): its static mid-span deflection
   against Euler-Bernoulli theory (:func:`plate_deflection_reference`).
+* :func:`hydrostatic_fsi_plate_3d` — the same plate extruded across a tank, periodic along
+  its span (plane strain in 3D): its deflection against the plane case's.
 * :func:`elastic_gate_dam_break` — a water column held by a rubber gate clamped at its top
   (Antoci, Gallati & Sibilla 2007).
 * :func:`dam_break_elastic_obstacle` — a dam break hitting an elastic plate fixed to the
@@ -15,6 +17,7 @@ fluid's pair forces act back on them (:mod:`sphjax.physics.fsi`).
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import jax.numpy as jnp
@@ -49,14 +52,15 @@ def plate_deflection_reference(
 
 
 def midspan_deflection(trajectory, case: Case):
-    """Vertical displacement ``y - Y`` of the plate at mid-span, ``[T]`` (or a scalar for
-    one State): the mean over the particles of the column(s) nearest ``x = L / 2``
-    (``case.info["midspan_indices"]``), across the whole thickness; jax.numpy."""
+    """Vertical displacement of the plate at mid-span (along the last axis: ``y - Y`` in
+    2D, ``z - Z`` in 3D), ``[T]`` (or a scalar for one State): the mean over the particles
+    of the column(s) nearest ``x = L / 2`` (``case.info["midspan_indices"]``), across the
+    whole thickness (and in 3D the whole span); jax.numpy."""
     states = getattr(trajectory, "states", trajectory)
     position = jnp.asarray(getattr(states, "position", states))
     idx = jnp.asarray(case.info["midspan_indices"])
-    anchor = case.state.reference_position[idx, 1]
-    return jnp.mean(position[..., idx, 1] - anchor, axis=-1)
+    anchor = case.state.reference_position[idx, -1]
+    return jnp.mean(position[..., idx, -1] - anchor, axis=-1)
 
 
 def _rows(x0, y0, nx, ny, dx):
@@ -66,7 +70,7 @@ def _rows(x0, y0, nx, ny, dx):
 
 def _fsi_model(kernel, h, domain, fluid_kw, wall_slip, penalty, no_slip_solid):
     return Model(
-        dim=2,
+        dim=len(domain.lower),
         smoothing_length=h,
         kernel=kernel,
         domain=domain,
@@ -95,8 +99,10 @@ def _column_indices(x, kind, x_probe, y_probe=None, dx=1.0):
 
 def _fluid_solid_state(fluid, walls, solid, clamped, dx, depth_of):
     """``initial_state(params)``: hydrostatic fluid density ``rho(rho0 g (H - y))``
-    (eq. 12 inverted), masses ``rho dx^2``, the solid at its reference density."""
+    (eq. 12 inverted; gravity along the last axis), masses ``rho dx^d``, the solid at its
+    reference density."""
     x = np.concatenate([fluid, walls, solid, clamped])
+    cell = dx ** x.shape[1]
     kind = np.concatenate(
         [
             np.full(len(fluid), Kind.FLUID),
@@ -114,8 +120,8 @@ def _fluid_solid_state(fluid, walls, solid, clamped, dx, depth_of):
         pressure = rho0 * (-p.gravity[-1]) * depth
         rho_f = tait_density(pressure, rho0, p.sound_speed, GAMMA)
         rho = jnp.where(is_solid, p.solid_density, jnp.where(is_fluid, rho_f, rho0))
-        mass = jnp.where(is_solid, p.solid_density, rho0) * dx**2
-        return make_state(x, 0.0, rho, mass, kind, volume=dx**2)
+        mass = jnp.where(is_solid, p.solid_density, rho0) * cell
+        return make_state(x, 0.0, rho, mass, kind, volume=cell)
 
     return x, kind, initial_state
 
@@ -127,11 +133,12 @@ WEAKLY_COMPRESSIBLE = dict(
 )
 
 
-def _coupled_params(g, rho_f, c0, artificial_alpha, E, poisson_ratio, rho_s):
-    """Params of a 2D coupled case: gravity along -y, the fluid's and the solid's groups."""
+def _coupled_params(g, rho_f, c0, artificial_alpha, E, poisson_ratio, rho_s, dim=2):
+    """Params of a coupled case: gravity along minus the last axis (-y in 2D, -z in 3D),
+    the fluid's and the solid's groups."""
     return make_params(
-        2,
-        gravity=(0.0, -g),
+        dim,
+        gravity=(0.0,) * (dim - 1) + (-g,),
         reference_density=rho_f,
         sound_speed=c0,
         artificial_alpha=artificial_alpha,
@@ -171,6 +178,128 @@ def _finish(name, model, params, initial_state, t_end, info, cfl, substeps=1, pe
     info = {**info, "substeps": substeps}
     dt = stable_time_step(state, model, params, solid_cfl=cfl)
     return finish_case(name, state, model, params, t_end, info, dt, initial_state)
+
+
+@dataclasses.dataclass(frozen=True)
+class _PlateSetUp:
+    """The plane (x, vertical) geometry of the hydrostatic plate and its derived numbers."""
+
+    n: int
+    dx: float
+    length: float
+    thickness: float
+    depth: float
+    young_modulus: float
+    poisson_ratio: float
+    solid_density: float
+    fluid_density: float
+    gravity: float
+    sound_speed: float
+    kernel: object
+    h: float
+    layers: int
+    n_clamp: int
+    tank_height: float
+    points: tuple  # (fluid, walls, plate, clamped) [N, 2] lattices
+
+    @property
+    def margin(self) -> float:
+        return (self.n_clamp + 2) * self.dx
+
+    @property
+    def domain_2d(self) -> Domain:
+        m, t, L, H = self.margin, self.thickness, self.length, self.depth
+        return Domain((-m, -t - m), (L + m, self.tank_height + H + m), (False,) * 2)
+
+    @property
+    def dry_omega(self) -> float:
+        """First bending mode of the dry plate clamped at both ends: ``omega = 22.373 /
+        L^2 sqrt(D / (rho_s t))``, ``D = E t^3 / (12 (1 - nu^2))``."""
+        E, t, nu = self.young_modulus, self.thickness, self.poisson_ratio
+        D = E * t**3 / (12.0 * (1.0 - nu**2))
+        return 22.373 / self.length**2 * math.sqrt(D / (self.solid_density * t))
+
+
+def _plate_set_up(
+    n, length, thickness, depth, E, poisson_ratio, rho_s, rho_f, gravity, c_factor, kernel, h_f
+) -> _PlateSetUp:
+    """The arguments of :func:`hydrostatic_fsi_plate` checked, rounded to whole particle
+    spacings, and the plane lattices of fluid, side walls, plate and clamps."""
+    n = check_resolution("n", n, 2)
+    L = check_positive("length", length)
+    t = check_positive("thickness", thickness)
+    H = check_positive("depth", depth)
+    E = check_positive("young_modulus", E)
+    rho_s = check_positive("solid_density", rho_s)
+    rho_f = check_positive("fluid_density", rho_f)
+    g = check_positive("gravity", gravity)
+    dx = t / n
+    nx = int(round(L / dx))
+    L = nx * dx
+    ny = int(round(H / dx))
+    H = ny * dx
+    kernel = as_kernel(kernel)
+    h = h_f * dx
+    cutoff = kernel.support * h
+    layers = wall_layers(cutoff, dx)
+    n_clamp = 2 * layers
+    tank_height = H + max(0.1 * H, 2 * cutoff)
+    n_wall = int(math.ceil(tank_height / dx))
+    fluid = _rows(0.0, 0.0, nx, ny, dx)
+    walls = np.concatenate(
+        [_rows(-layers * dx, 0.0, layers, n_wall, dx), _rows(L, 0.0, layers, n_wall, dx)]
+    )
+    plate = _rows(0.0, -t, nx, n, dx)
+    clamped = np.concatenate(
+        [_rows(-n_clamp * dx, -t, n_clamp, n, dx), _rows(L, -t, n_clamp, n, dx)]
+    )
+    c0 = c_factor * math.sqrt(g * H)
+    return _PlateSetUp(
+        n, dx, L, t, H, E, float(poisson_ratio), rho_s, rho_f, g, c0, kernel, h, layers,
+        n_clamp, tank_height, (fluid, walls, plate, clamped),
+    )  # fmt: skip
+
+
+def _plate_case(
+    name, s: _PlateSetUp, points, domain, artificial_alpha, cfl, t_end, substeps, **extra
+):
+    """The hydrostatic plate's Case from its set-up ``s`` and its particles ``points``
+    (fluid, walls, plate, clamped; plane or extruded) in ``domain``."""
+    fluid, walls, plate, clamped = points
+    dim = fluid.shape[1]
+    x, kind, initial_state = _fluid_solid_state(
+        fluid, walls, plate, clamped, s.dx, lambda x: s.depth - x[:, -1]
+    )
+    params = _coupled_params(
+        s.gravity, s.fluid_density, s.sound_speed, artificial_alpha, s.young_modulus,
+        s.poisson_ratio, s.solid_density, dim,
+    )  # fmt: skip
+    model = _fsi_model(s.kernel, s.h, domain, WEAKLY_COMPRESSIBLE, "no_slip", False, True)
+    omega = s.dry_omega
+    period = 2.0 * math.pi / omega
+    if t_end is None:
+        t_end = 20 * 2.0 * math.pi / omega
+    reference = plate_deflection_reference(
+        s.length, s.thickness, s.depth, s.young_modulus, s.poisson_ratio, s.solid_density,
+        s.fluid_density, s.gravity,
+    )  # fmt: skip
+    info = dict(
+        n=s.n,
+        dx=s.dx,
+        length=s.length,
+        thickness=s.thickness,
+        depth=s.depth,
+        gravity=s.gravity,
+        reference_deflection=float(reference),
+        dry_period=period,
+        midspan_indices=tuple(int(i) for i in _column_indices(x, kind, 0.5 * s.length, dx=s.dx)),
+        n_fluid=len(fluid),
+        n_solid=len(plate),
+        n_clamped=len(clamped),
+        **extra,
+    )
+    args = (model, params, initial_state, t_end, info, cfl, substeps, period)
+    return _finish(name, *args)
 
 
 def hydrostatic_fsi_plate(
@@ -214,64 +343,92 @@ def hydrostatic_fsi_plate(
         to the fluid's); ``"auto"``: as many as fit in the fluid's stable step and in
         1/20 of the dry first-mode period.
     """
-    n = check_resolution("n", n, 2)
-    L = check_positive("length", length)
-    t = check_positive("thickness", thickness)
-    H = check_positive("depth", depth)
-    E = check_positive("young_modulus", young_modulus)
-    rho_s = check_positive("solid_density", solid_density)
-    rho_f = check_positive("fluid_density", fluid_density)
-    g = check_positive("gravity", gravity)
-    dx = t / n
-    nx = int(round(L / dx))
-    L = nx * dx
-    ny = int(round(H / dx))
-    H = ny * dx
-    kernel = as_kernel(kernel)
-    h = h_factor * dx
-    cutoff = kernel.support * h
-    layers = wall_layers(cutoff, dx)
-    n_clamp = 2 * layers
-    tank_height = H + max(0.1 * H, 2 * cutoff)
-    n_wall = int(math.ceil(tank_height / dx))
-    fluid = _rows(0.0, 0.0, nx, ny, dx)
-    walls = np.concatenate(
-        [_rows(-layers * dx, 0.0, layers, n_wall, dx), _rows(L, 0.0, layers, n_wall, dx)]
-    )
-    plate = _rows(0.0, -t, nx, n, dx)
-    clamped = np.concatenate(
-        [_rows(-n_clamp * dx, -t, n_clamp, n, dx), _rows(L, -t, n_clamp, n, dx)]
-    )
-    x, kind, initial_state = _fluid_solid_state(
-        fluid, walls, plate, clamped, dx, lambda x: H - x[:, 1]
-    )
-    c0 = sound_speed_factor * math.sqrt(g * H)
-    params = _coupled_params(g, rho_f, c0, artificial_alpha, E, poisson_ratio, rho_s)
-    margin = (n_clamp + 2) * dx
-    domain = Domain((-margin, -t - margin), (L + margin, tank_height + H + margin), (False,) * 2)
-    model = _fsi_model(kernel, h, domain, WEAKLY_COMPRESSIBLE, "no_slip", False, True)
-    D = E * t**3 / (12.0 * (1.0 - poisson_ratio**2))
-    omega = 22.373 / L**2 * math.sqrt(D / (rho_s * t))  # clamped-clamped first mode (dry)
-    if t_end is None:
-        t_end = 20 * 2.0 * math.pi / omega
-    reference = plate_deflection_reference(L, t, H, E, poisson_ratio, rho_s, rho_f, g)
-    info = dict(
-        n=n,
-        dx=dx,
-        length=L,
-        thickness=t,
-        depth=H,
-        gravity=g,
-        reference_deflection=float(reference),
-        dry_period=2.0 * math.pi / omega,
-        midspan_indices=tuple(int(i) for i in _column_indices(x, kind, 0.5 * L, dx=dx)),
-        n_fluid=len(fluid),
-        n_solid=len(plate),
-        n_clamped=len(clamped),
-    )
-    period = info["dry_period"]
-    args = (model, params, initial_state, t_end, info, cfl, substeps, period)
-    return _finish("hydrostatic_fsi_plate", *args)
+    plate = _plate_set_up(
+        n, length, thickness, depth, young_modulus, poisson_ratio, solid_density,
+        fluid_density, gravity, sound_speed_factor, kernel, h_factor,
+    )  # fmt: skip
+    return _plate_case("hydrostatic_fsi_plate", plate, plate.points, plate.domain_2d,
+                       artificial_alpha, cfl, t_end, substeps)  # fmt: skip
+
+
+def _extrude(points, dx, n_span):
+    """Plane points ``(x, v)`` extruded along y: ``(x, (j + 1/2) dx, v)``, ``0 <= j < n_span``."""
+    y = (np.arange(n_span) + 0.5) * dx
+    plane = np.repeat(points, n_span, axis=0)
+    return np.stack([plane[:, 0], np.tile(y, len(points)), plane[:, 1]], axis=1)
+
+
+def hydrostatic_fsi_plate_3d(
+    n: int = 2,
+    span: float | None = None,
+    length: float = 1.0,
+    thickness: float = 0.05,
+    depth: float = 2.0,
+    young_modulus: float = 67.5e9,
+    poisson_ratio: float = 0.3,
+    solid_density: float = 2700.0,
+    fluid_density: float = 1000.0,
+    gravity: float = 9.81,
+    sound_speed_factor: float = 10.0,
+    artificial_alpha: float = 0.1,
+    kernel="wendland_c2",
+    h_factor: float = 1.2,
+    cfl: float = 0.5,
+    t_end: float | None = None,
+    substeps: int | str = "auto",
+) -> Case:
+    """A water column resting on an elastic plate clamped at both ends, in 3D: the
+    hydrostatic plate extruded across a tank, periodic along its span.
+
+    :func:`hydrostatic_fsi_plate` in three dimensions.
+
+    The plate ``[0, L] x [0, W) x [-t, 0]`` (x along the plate, y across it, z up;
+    gravity along ``-z``), clamped particles beyond both ends, the fluid ``[0, L] x [0, W)
+    x [0, H]`` between two no-slip side walls at ``x = 0`` and ``x = L``: the particles of
+    the plane case, in its (x, z) plane, repeated at every spacing along y, with the same
+    fluid, solid and coupling (St Venant-Kirchhoff in 3D).  Periodic along y, the plate
+    is uniform across its span and cannot strain along it: it is a plane-strain plate,
+    and the plane case's reference ``w = -q L^4 / (384 D)``, ``D = E t^3 / (12 (1 -
+    nu^2))`` (:func:`plate_deflection_reference`; ``info["reference_deflection"]``)
+    applies, as does the plane run of the same arguments.  The mid-span deflection
+    (:func:`midspan_deflection`) is the mean over the particles nearest ``x = L / 2``
+    through the thickness and across the span.
+
+    Args:
+      n: particles through the plate thickness (``dx = t / n``); the default 2 gives
+        about 23 000 particles.
+      span: the periodic extent ``W`` along y, rounded to whole spacings; at least (and
+        by default) ``2.5`` kernel supports, the least the periodic neighbour search
+        allows (6 spacings with the default kernel).
+      substeps: split integration, as in :func:`hydrostatic_fsi_plate`; by default
+        ``"auto"`` (unsplit, the plate's step would set the fluid's: 60 times more
+        evaluations of the whole model).
+
+    The other arguments are :func:`hydrostatic_fsi_plate`'s.
+    """
+    s = _plate_set_up(
+        n, length, thickness, depth, young_modulus, poisson_ratio, solid_density,
+        fluid_density, gravity, sound_speed_factor, kernel, h_factor,
+    )  # fmt: skip
+    dx = s.dx
+    least = max(4, math.ceil(2.5 * s.kernel.support * s.h / dx - 1e-9))
+    if span is None:
+        n_span = least
+    else:
+        n_span = int(round(check_positive("span", span) / dx))
+        if n_span < least:
+            raise ValueError(
+                f"span must be at least {least * dx:.6g} ({least} particle spacings, 2.5 "
+                f"kernel supports) for the periodic neighbour search, got {span!r}"
+            )
+    W = n_span * dx
+    points = tuple(_extrude(p, dx, n_span) for p in s.points)
+    m, t, L, H = s.margin, s.thickness, s.length, s.depth
+    domain = Domain((-m, 0.0, -t - m), (L + m, W, s.tank_height + H + m), (False, True, False))
+    return _plate_case(
+        "hydrostatic_fsi_plate_3d", s, points, domain, artificial_alpha, cfl, t_end,
+        substeps, span=W, n_span=n_span,
+    )  # fmt: skip
 
 
 def elastic_gate_dam_break(
@@ -478,6 +635,7 @@ __all__ = [
     "dam_break_elastic_obstacle",
     "elastic_gate_dam_break",
     "hydrostatic_fsi_plate",
+    "hydrostatic_fsi_plate_3d",
     "midspan_deflection",
     "plate_deflection_reference",
 ]
