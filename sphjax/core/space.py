@@ -62,6 +62,15 @@ def safe_norm(dr, axis=-1):
     return jnp.where(positive, jnp.sqrt(jnp.where(positive, r2, 1.0)), 0.0)
 
 
+def covered(weight):
+    """``weight > sqrt(tiny)``: where a kernel-weight sum (a Shepard denominator) is large
+    enough to divide by.  A fluid particle at the very edge of the support gives a weight
+    of order 1e-25 in float32; the quotient itself is fine, but its derivative
+    ``-num / weight^2`` overflows (``weight^2`` underflows to 0) and, times the kernel's
+    vanishing slope there, gives NaN gradients.  Below this floor the sum counts as empty."""
+    return weight > jnp.sqrt(jnp.finfo(jnp.result_type(weight)).tiny)
+
+
 @jax.custom_jvp
 def dot(a, b):
     """``a . b`` over the last (spatial) axis, written out: XLA on the CPU ends a loop

@@ -39,7 +39,7 @@ import optax
 from sphjax import kernels
 from sphjax.core.case import Case
 from sphjax.core.params import Params
-from sphjax.core.space import minimum_image
+from sphjax.core.space import covered, minimum_image, safe_norm
 from sphjax.core.state import Kind, State
 from sphjax.integration.simulate import simulate
 from sphjax.surrogate.gns import GNS
@@ -69,11 +69,17 @@ def probe_velocity(state: State, case: Case, probes, smoothing_length=None) -> j
         size,
         domain.periodic,
     )
-    r = jnp.sqrt(jnp.sum(dr * dr, -1))
+    # safe_norm: a probe on top of a particle (a lattice start, a wall particle) would
+    # otherwise give a NaN gradient (d|dr|/d dr = dr / 0), which poisons training
+    r = safe_norm(dr)
     w = kernels.W(model.kernel, r, h, model.dim)
     fluid = (state.kind == Kind.FLUID).astype(w.dtype)
     wv = w * (state.mass / state.density * fluid)[None, :]
-    return (wv @ state.velocity) / jnp.maximum(jnp.sum(wv, -1, keepdims=True), 1e-30)
+    # a probe with no fluid particle in reach reads 0; the floor of `covered` keeps the
+    # quotient's derivative finite in float32 (a NaN gradient would poison training)
+    shepard = jnp.sum(wv, -1, keepdims=True)
+    ok = covered(shepard)
+    return jnp.where(ok, (wv @ state.velocity) / jnp.where(ok, shepard, 1.0), 0.0)
 
 
 def relative_error(u, reference) -> jax.Array:

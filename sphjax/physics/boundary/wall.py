@@ -16,7 +16,7 @@ import dataclasses
 
 import jax.numpy as jnp
 
-from sphjax.core.space import scale
+from sphjax.core.space import covered, scale
 
 
 def extrapolation_terms(pair, pressure_f, density_f, velocity_f):
@@ -31,18 +31,20 @@ def extrapolation_terms(pair, pressure_f, density_f, velocity_f):
 
 def wall_pressure(sums, gravity, wall_acceleration):
     """Adami pressure ``p_w`` from the summed :func:`extrapolation_terms` (0 where a wall
-    particle has no fluid neighbour)."""
+    particle has no fluid neighbour, or only one at the very edge of the support: see
+    :func:`sphjax.core.space.covered`)."""
     weight = sums["weight"]
     hydrostatic = jnp.sum((gravity - wall_acceleration) * sums["rho_r"], axis=-1)
-    has_fluid = weight > 0
+    has_fluid = covered(weight)
     safe = jnp.where(has_fluid, weight, 1.0)
     return jnp.where(has_fluid, (sums["pressure"] + hydrostatic) / safe, 0.0)
 
 
 def wall_velocity(sums, prescribed_velocity):
-    """No-slip wall velocity ``2 v_wall - sum_f v_f W_wf / sum_f W_wf``."""
+    """No-slip wall velocity ``2 v_wall - sum_f v_f W_wf / sum_f W_wf`` (the sum taken as 0
+    where :func:`sphjax.core.space.covered` finds no fluid weight)."""
     weight = sums["weight"][:, None]
-    has_fluid = weight > 0
+    has_fluid = covered(weight)
     smoothed = jnp.where(has_fluid, sums["velocity"] / jnp.where(has_fluid, weight, 1.0), 0.0)
     return 2.0 * prescribed_velocity - smoothed
 
