@@ -104,6 +104,34 @@ def test_hydrostatic_wall_pressure_extrapolation():
     np.testing.assert_allclose(p[first_layer], expected, rtol=0.02)
 
 
+def test_wall_extrapolation_gradient_is_finite_at_the_edge_of_the_support():
+    """A wall particle whose only fluid neighbour sits at the edge of the kernel support has
+    a weight sum of ~1e-25 in float32: the Adami quotients (eq. of the wall pressure and
+    the no-slip velocity) would have NaN derivatives there (``weight^2`` underflows); such
+    a sum counts as no fluid (``sphjax.core.space.covered``), and the gradient stays finite
+    (it poisoned solver-in-the-loop training on the dam break)."""
+    from sphjax.physics.boundary.wall import wall_pressure, wall_velocity
+
+    def extrapolated(weight):
+        sums = {
+            "weight": weight,
+            "pressure": weight * 1e3,
+            "rho_r": weight[:, None] * jnp.ones((1, 2), jnp.float32),
+            "velocity": weight[:, None] * jnp.ones((1, 2), jnp.float32),
+        }
+        g = jnp.asarray([0.0, -9.81], jnp.float32)
+        p = wall_pressure(sums, g, jnp.zeros((1, 2), jnp.float32))
+        v = wall_velocity(sums, jnp.zeros((1, 2), jnp.float32))
+        return jnp.sum(p) + jnp.sum(v)
+
+    for weight in (1e-25, 1e-3):
+        w = jnp.asarray([weight], jnp.float32)
+        grad = jax.grad(extrapolated)(w)
+        assert bool(jnp.all(jnp.isfinite(grad))), weight
+    # a sum well inside the support still extrapolates: p_w = sum p W / sum W + ...
+    assert float(extrapolated(jnp.asarray([1e-3], jnp.float32))) != 0.0
+
+
 def test_switching_float64_off_and_on_within_a_session():
     """The cached jax-md functions hold constants of the precision they were built in;
     a session that turns ``jax_enable_x64`` off after a float64 run (the case the
