@@ -63,3 +63,15 @@ def test_bad_arguments_are_named(problem):
         sil.make_problem(problem.coarse, other, horizon=2, ratio=2)
     with pytest.raises(ValueError, match="probe_box must be"):
         sil.make_problem(problem.coarse, problem.fine, horizon=2, ratio=2, probe_box=((0, 1),))
+
+
+def test_a_non_finite_gradient_stops_training_with_its_iteration(problem):
+    """A NaN in the gradient (here from a NaN reference) stops ``train`` before Adam
+    writes NaN into every weight, naming the iteration, instead of failing later as an
+    unstable rollout."""
+    import dataclasses
+
+    poisoned = dataclasses.replace(problem, reference=problem.reference * np.nan)
+    net = sil.Corrector(problem, jax.random.PRNGKey(0))
+    with pytest.raises(FloatingPointError, match="not finite at iteration 1"):
+        sil.train(poisoned, net, unroll=1, iterations=3, log=lambda s: None)

@@ -409,8 +409,10 @@ def train(
         (loss, over), grads = eqx.filter_value_and_grad(loss_fn, has_aux=True)(
             net, state, params, ref
         )
+        leaves = jax.tree_util.tree_leaves(eqx.filter(grads, eqx.is_array))
+        finite = jnp.all(jnp.stack([jnp.all(jnp.isfinite(g)) for g in leaves]))
         updates, opt_state = optimizer.update(grads, opt_state, eqx.filter(net, eqx.is_array))
-        return eqx.apply_updates(net, updates), opt_state, loss, over
+        return eqx.apply_updates(net, updates), opt_state, loss, over, finite
 
     @eqx.filter_jit
     def starts_of(net, params):
@@ -443,9 +445,18 @@ def train(
         j = int(rng.integers(n_starts))
         state = jax.tree_util.tree_map(lambda a, j=j: a[j], starts[c])
         ref = reference[c, j * unroll + 1 : (j + 1) * unroll + 1]
-        net, opt_state, loss, over = update(net, opt_state, state, problem.conditions[c][0], ref)
+        new_net, new_opt_state, loss, over, finite = update(
+            net, opt_state, state, problem.conditions[c][0], ref
+        )
         if bool(over):
             raise RuntimeError("the correction's neighbour list overflowed; raise its capacity")
+        if not bool(finite):  # Adam would write NaN into every weight
+            raise FloatingPointError(
+                f"train: the gradient through the unrolled solver is not finite at iteration "
+                f"{k + 1} (condition {c}, start {j}, loss {float(loss):.4g}); stopped before "
+                f"an update that would make every weight NaN: lower lr or unroll, or use float64"
+            )
+        net, opt_state = new_net, new_opt_state
         losses.append(float(loss))
         k += 1
         if k == 1:
