@@ -304,10 +304,11 @@ def support_list(idx, x_rows, x_cols, domain, cutoff: float, width: int):
     come within it before the next rebuild (in 2D about 60 % more slots with a skin of a
     quarter of the support radius); every pair term costs as much in those slots as in a
     real neighbour's.  This keeps, per row and in the same order, only the columns with
-    ``|r_ab|^2 < cutoff^2`` (minimum image; the test the pair geometry applies), packed
-    into ``width`` slots: the two-level list (skin list rebuilt rarely, support list
-    compacted from it at every step).  Dropped pairs have ``W = 0`` and ``grad W = 0``,
-    so sums over the result equal sums over ``idx``.
+    ``|r_ab|^2 < cutoff^2`` (minimum image), packed into ``width`` slots: the second level
+    of a two-level list.  With ``cutoff`` the kernel support radius, the dropped pairs have
+    ``W = 0`` and ``grad W = 0``, so sums over the result equal sums over ``idx``; with a
+    slightly larger one the result stays valid until a particle has moved half the
+    difference.
 
     Args:
       idx: ``[n_rows, K]`` column indices, padded with ``n_cols``.
