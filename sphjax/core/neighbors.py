@@ -27,7 +27,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from sphjax._jax_md import modules as _jax_md_modules
-from sphjax.core.space import minimum_image
+from sphjax.core.space import displacement_fn, minimum_image
 
 partition, jmd_space = _jax_md_modules("partition", "space")
 
@@ -295,3 +295,54 @@ def measured_members(union_idx, rows, cols, multiplier: float, extra: int = 0) -
     inside = (block >= cols[0]) & (block < cols[1])
     count = int(inside.any(axis=1).sum())
     return max(1, int(math.ceil(count * multiplier)) + int(extra))
+
+
+def support_list(idx, x_rows, x_cols, domain, cutoff: float, width: int):
+    """The neighbours of a Verlet list ``idx`` that are inside the kernel support now.
+
+    A list with a skin holds, besides the neighbours within ``cutoff``, those that may
+    come within it before the next rebuild (in 2D about 60 % more slots with a skin of a
+    quarter of the support radius); every pair term costs as much in those slots as in a
+    real neighbour's.  This keeps, per row and in the same order, only the columns with
+    ``|r_ab|^2 < cutoff^2`` (minimum image), packed into ``width`` slots: the second level
+    of a two-level list.  With ``cutoff`` the kernel support radius, the dropped pairs have
+    ``W = 0`` and ``grad W = 0``, so sums over the result equal sums over ``idx``; with a
+    slightly larger one the result stays valid until a particle has moved half the
+    difference.
+
+    Args:
+      idx: ``[n_rows, K]`` column indices, padded with ``n_cols``.
+      x_rows, x_cols: ``[n_rows, d]``, ``[n_cols, d]`` positions.
+      width: slots per row of the result (static).
+    Returns:
+      ``(support, overflow)``: ``[n_rows, width]`` int32 column indices padded with
+      ``n_cols``, and whether some row has more than ``width`` neighbours in the support.
+    """
+    n_rows, n_cols = idx.shape[0], x_cols.shape[0]
+    real = idx < n_cols
+    dr = displacement_fn(domain)(x_rows[:, None, :], x_cols[jnp.where(real, idx, 0)])
+    r2 = sum(dr[..., i] * dr[..., i] for i in range(dr.shape[-1]))
+    inside = real & (r2 < cutoff**2)
+    slot = jnp.cumsum(inside, axis=1, dtype=jnp.int32) - 1
+    overflow = jnp.any(slot[:, -1] >= width) if idx.shape[1] else jnp.asarray(False)
+    slot = jnp.where(inside, slot, width)  # out of range: dropped by the scatter
+    rows = jnp.broadcast_to(jnp.arange(n_rows, dtype=jnp.int32)[:, None], idx.shape)
+    support = (
+        jnp.full((n_rows, width), n_cols, jnp.int32)
+        .at[rows, slot]
+        .set(idx.astype(jnp.int32), mode="drop")
+    )
+    return support, overflow
+
+
+def measured_support(idx, x_rows, x_cols, domain, cutoff: float, multiplier: float, extra=0):
+    """Width of :func:`support_list` for concrete arrays: the largest count of neighbours
+    in the support now times ``multiplier``, plus ``extra``."""
+    n_cols = x_cols.shape[0]
+    real = np.asarray(idx) < n_cols
+    dr = displacement_fn(domain)(
+        jnp.asarray(x_rows)[:, None, :], jnp.asarray(x_cols)[jnp.where(real, idx, 0)]
+    )
+    inside = real & (np.asarray(jnp.sum(dr * dr, axis=-1)) < cutoff**2)
+    most = int(inside.sum(axis=1).max(initial=0))
+    return max(1, int(math.ceil(most * multiplier)) + int(extra))
