@@ -16,15 +16,29 @@ Each reads the probes the case put in ``case.info``.
 
 from __future__ import annotations
 
+import dataclasses
+
 import jax
 import jax.numpy as jnp
 import numpy as np
 
 from sphjax.core import kernels
 from sphjax.core.case import Case
+from sphjax.core.space import displacement_fn
 from sphjax.core.state import Kind
+from sphjax.physics.fluid.eos import TaitEOS
 from sphjax.physics.fluid.system import FluidSystem
-from sphjax.physics.solid.material import green_lagrange_strain, lame_constants
+from sphjax.physics.solid.correction import (
+    corrected_kernel_gradient,
+    correction_matrix,
+    correction_moment,
+)
+from sphjax.physics.solid.deformation import deformation_term
+from sphjax.physics.solid.material import (
+    green_lagrange_strain,
+    lame_constants,
+    st_venant_kirchhoff_energy,
+)
 
 
 def poiseuille_centreline_speed(state, case: Case) -> float:
@@ -177,7 +191,13 @@ def tait_internal_energy(trajectory, case: Case):
     (Monaghan 2005, section 5); ``[T]``."""
     s = _states(trajectory)
     fluid = case.params.fluid
-    gamma = case.model.system(FluidSystem).equation_of_state.gamma
+    eos = case.model.system(FluidSystem).equation_of_state
+    if not isinstance(eos, TaitEOS):
+        raise ValueError(
+            f"tait_internal_energy needs a fluid with TaitEOS, got {type(eos).__name__}; "
+            "build the case with the Tait equation of state or leave the internal energy out"
+        )
+    gamma = eos.gamma
     rho0, c0 = fluid.reference_density, fluid.sound_speed
     B = rho0 * c0**2 / gamma
     rho = jnp.where(s.kind == Kind.FLUID, s.density, rho0)
@@ -188,41 +208,47 @@ def tait_internal_energy(trajectory, case: Case):
 
 
 def strain_energy(trajectory, case: Case):
-    """Elastic strain energy of the TLSPH solid, ``U_s = sum_a V0_a psi(F_a)`` over its
+    """Elastic strain energy of the TLSPH solid, ``U_s = sum_a V0_a psi(E(F_a))`` over its
     free and clamped particles, with the St Venant-Kirchhoff energy density
-
-        psi(F) = lambda / 2 tr(E)^2 + mu E : E,     E = (F^T F - I) / 2   (eqs. 17-19),
-
-    ``F_a`` from eq. 16 with the corrected kernel gradient of eq. 15 on the reference
-    configuration (the case's kernel and smoothing length; all pairs of the solid, which
-    is small).  The solid's momentum equation (eq. 14) is the variational discretisation
-    of this energy: its elastic forces are ``-dU_s / dx_a``.  ``[T]`` (or a scalar)."""
+    (:func:`~sphjax.physics.solid.material.st_venant_kirchhoff_energy`, eqs. 17-19), ``F_a``
+    from eq. 16 with the correction matrix of eq. 15 on the reference configuration, over
+    all pairs of the solid within the kernel support (minimum image on periodic axes; dense
+    pairs: the solid is small).  The solid's momentum equation (eq. 14) is the variational
+    discretisation of this energy: its elastic forces are ``-dU_s / dx_a``.  ``[T]`` (or a
+    scalar for one State)."""
     s = _states(trajectory)
     model = case.model
+    displacement = displacement_fn(model.domain)
     solid = np.flatnonzero(np.asarray(case.state.kind) >= Kind.SOLID)
     X = jnp.asarray(case.state.reference_position)[solid]
     V = jnp.asarray(case.state.volume)[solid]
-    dX = X[:, None, :] - X[None, :, :]
+    dX = displacement(X[:, None, :], X[None, :, :])
     R = jnp.linalg.norm(dX, axis=-1)
     near = (R < model.cutoff) & (R > 0)
-    grad = kernels.grad_W(model.kernel, dX, R, model.smoothing_length, model.dim)
-    grad = jnp.where(near[..., None], grad, 0.0)
-    moment = -jnp.einsum("b,abi,abj->aij", V, grad, dX)  # eq. 15
-    corrected = jnp.einsum("aij,abj->abi", jnp.linalg.inv(moment), grad)
+    grad = kernels.grad_W(model.kernel, dX, jnp.where(near, R, 1.0), model.smoothing_length,
+                          model.dim)  # fmt: skip
+    reference = _DensePairs(dr=dX, grad_w=jnp.where(near[..., None], grad, 0.0))
+    moment = jnp.sum(correction_moment(reference, V[None, :]), axis=1)  # eq. 15
+    corrected = corrected_kernel_gradient(correction_matrix(moment)[:, None], reference.grad_w)
     lam, mu = lame_constants(case.params.solid.young_modulus, case.params.solid.poisson_ratio)
 
     def energy(x):
-        dx = x[:, None, :] - x[None, :, :]
-        F = -jnp.einsum("b,abi,abj->aij", V, dx, corrected)  # eq. 16
-        E = green_lagrange_strain(F)
-        trace = jnp.trace(E, axis1=-2, axis2=-1)
-        psi = 0.5 * lam * trace**2 + mu * jnp.sum(E * E, axis=(-2, -1))
-        return jnp.sum(V * psi)
+        dx = displacement(x[:, None, :], x[None, :, :])
+        F = jnp.sum(deformation_term(dx, corrected, V[None, :]), axis=1)  # eq. 16
+        return jnp.sum(V * st_venant_kirchhoff_energy(green_lagrange_strain(F), lam, mu))
 
     x = jnp.asarray(s.position)[..., solid, :]
     if x.ndim == 2:
         return energy(x)
     return jax.jit(jax.vmap(energy))(x)
+
+
+@dataclasses.dataclass(frozen=True)
+class _DensePairs:
+    """All pairs of a small particle set, as :func:`correction_moment` reads them."""
+
+    dr: jax.Array
+    grad_w: jax.Array
 
 
 def energy_budget(trajectory, case: Case) -> dict:

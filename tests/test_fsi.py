@@ -445,3 +445,34 @@ def test_obstacle_budgets_through_the_impact(obstacle_run):
     budget = observables.momentum_budget(trajectory, case)
     dP = budget["momentum"][:, 0] - budget["momentum"][0, 0]
     assert np.max(np.abs(dP - budget["impulse"][:, 0])) < 1e-2 * np.max(np.abs(dP))
+
+
+def test_strain_energy_is_exact_for_an_affine_stretch_and_zero_at_rest():
+    """``observables.strain_energy`` (eqs. 15-19 through the solid's own functions): zero in
+    the reference configuration, ``psi(E(A)) sum V0`` for any affine map ``x = A X`` (eq. 16
+    reproduces ``F = A`` exactly with the correction of eq. 15); the Tait internal energy
+    refuses a fluid with another equation of state in one line."""
+    from sphjax import observables
+    from sphjax.physics.solid.material import lame_constants
+
+    case = sphjax.cases.get("dam_break_elastic_obstacle", n=2)
+    state = case.state
+    solid = np.asarray(state.kind) >= Kind.SOLID
+    X = np.asarray(state.reference_position)
+    at_rest = state.replace(position=jnp.asarray(np.where(solid[:, None], X, state.position)))
+    A = np.array([[1.01, 0.003], [0.0, 0.99]])
+    stretched = state.replace(position=jnp.asarray(np.where(solid[:, None], X @ A.T, X)))
+    E = 0.5 * (A.T @ A - np.eye(2))
+    lam, mu = lame_constants(case.params.solid.young_modulus, case.params.solid.poisson_ratio)
+    psi = 0.5 * lam * np.trace(E) ** 2 + mu * np.sum(E * E)
+    exact = float(psi) * float(np.sum(np.asarray(state.volume)[solid]))
+    assert float(observables.strain_energy(stretched, case)) == pytest.approx(exact, rel=1e-10)
+    assert abs(float(observables.strain_energy(at_rest, case))) < 1e-12 * exact
+    fluid = case.model.system(sphjax.FluidSystem)
+    systems = tuple(
+        s.replace(equation_of_state=sphjax.LinearEOS()) if s is fluid else s
+        for s in case.model.systems
+    )
+    linear = case.replace(model=case.model.replace(systems=systems))
+    with pytest.raises(ValueError, match="tait_internal_energy needs a fluid with TaitEOS"):
+        observables.tait_internal_energy(state, linear)

@@ -37,6 +37,13 @@ def st_venant_kirchhoff_stress(strain: jax.Array, lam, mu) -> jax.Array:
     return lam * trace * eye + 2.0 * mu * strain
 
 
+def st_venant_kirchhoff_energy(strain: jax.Array, lam, mu) -> jax.Array:
+    """Strain energy density ``psi = lambda / 2 tr(E)^2 + mu E : E`` per reference volume,
+    whose derivative ``d psi / d E`` is the stress ``S`` of eq. 18."""
+    trace = jnp.trace(strain, axis1=-2, axis2=-1)
+    return 0.5 * lam * trace**2 + mu * jnp.sum(strain * strain, axis=(-2, -1))
+
+
 def pk1_stress(F: jax.Array, S: jax.Array) -> jax.Array:
     """First Piola-Kirchhoff stress ``P = F S``."""
     return jnp.einsum("...ik,...kj->...ij", F, S)
