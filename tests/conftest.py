@@ -1,9 +1,27 @@
-"""Test configuration: every test runs in float64 (gradient and conservation checks)."""
+"""Test configuration: every test runs in float64 (gradient and conservation checks), and
+compiled programs are kept in a persistent cache shared by the test workers and every
+process they start (CLI runs, notebook kernels), so a program compiled once in a run is
+not compiled again."""
+
+import os
+from pathlib import Path
 
 import jax
 import pytest
 
 jax.config.update("jax_enable_x64", True)
+
+# The cache lives with pytest's own (.pytest_cache, ignored by git).  The environment
+# variables reach the subprocesses; the config updates this process, whose jax is
+# already imported.
+COMPILATION_CACHE = Path(__file__).resolve().parents[1] / ".pytest_cache" / "jax-compilation"
+os.environ.setdefault("JAX_COMPILATION_CACHE_DIR", str(COMPILATION_CACHE))
+os.environ.setdefault("JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS", "0.2")
+jax.config.update("jax_compilation_cache_dir", os.environ["JAX_COMPILATION_CACHE_DIR"])
+jax.config.update(
+    "jax_persistent_cache_min_compile_time_secs",
+    float(os.environ["JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS"]),
+)
 
 
 @pytest.fixture(autouse=True)
