@@ -66,9 +66,10 @@ def dry_case(case):
     info = case.info
     p = case.params
     load = info["gravity"] * (
-        float(p.reference_density) * info["depth"] + float(p.solid_density) * info["thickness"]
+        float(p.reference_density) * info["depth"] + info["solid_density"] * info["thickness"]
     )
-    g_eff = load / (float(p.solid_density) * info["thickness"])
+    # the particles' weight per unit length is rho_particles (n dx) g_eff
+    g_eff = load / (float(p.solid_density) * info["body_thickness"])
     params = sphjax.make_params(
         2,
         gravity=(0.0, -g_eff),
@@ -100,6 +101,21 @@ def measure(case, t_end):
         mid_range=float(0.5 * (late.max() + late.min())),
         series=[float(v) for v in w[:: max(1, len(w) // 50)]],
     )
+
+
+def relaxed(case, t_end):
+    """Static deflection of ``case`` by dynamic relaxation
+    (:func:`sphjax.cases.solid.relax_to_rest`, velocity damping ``2 omega`` of the dry
+    first mode, critical for it), over the analytic value: the last two segments' values."""
+    from sphjax.cases.solid import relax_to_rest
+
+    omega = 2.0 * np.pi / case.info["dry_period"]
+    segments = int(round(10 * t_end / case.info["dry_period"]))
+    start = time.perf_counter()
+    _, finals = relax_to_rest(case, t_end=t_end, damping_rate=2.0 * omega, segments=segments)
+    w = np.asarray(midspan_deflection(finals, case)) / case.info["reference_deflection"]
+    return dict(static=float(w[-1]), static_before=float(w[-2]),
+                wall_s=round(time.perf_counter() - start, 1))  # fmt: skip
 
 
 def read_series(path):
@@ -274,8 +290,28 @@ def main(argv=None):
     p.add_argument("--depth", type=float, default=0.5)
     p.add_argument("--periods", type=float, default=8.0)
     p.add_argument("--dry-only", action="store_true")
+    p.add_argument(
+        "--relax", action="store_true", help="the dry plate's static value by relaxation"
+    )
     p.add_argument("--no-dry", action="store_true")
     p.add_argument("--substeps", nargs="+", default=["1"])
+    p.add_argument("--placement", choices=("cell", "surface"), default="cell")
+    p.add_argument("--h-factor", type=float, default=None)
+    p.add_argument("--length", type=float, default=1.0)
+    p.add_argument("--thickness", type=float, default=0.05)
+    p.add_argument("--young-modulus", type=float, default=67.5e9)
+    p.add_argument("--float64", action="store_true")
+    p.add_argument(
+        "--face-weight",
+        type=float,
+        default=1.0,
+        help="surface placement: volume of a face-row particle over dx^2",
+    )
+    p.add_argument(
+        "--free-end-columns",
+        action="store_true",
+        help="surface placement: leave the columns on x = 0 and x = L free",
+    )
     p.add_argument("--out", default=None)
     args = p.parse_args(argv)
     if args.case in ("obstacle", "gate"):
@@ -291,16 +327,36 @@ def main(argv=None):
         return
     if args.out is None:
         p.error("--out is required with --case plate")
+    if args.float64:
+        jax.config.update("jax_enable_x64", True)
+    if args.free_end_columns:
+        sphjax.cases.fsi.CLAMP_END_COLUMNS = False
+    sphjax.cases.fsi.FACE_WEIGHT = args.face_weight
+    plate = dict(
+        depth=args.depth,
+        placement=args.placement,
+        h_factor=args.h_factor,
+        length=args.length,
+        thickness=args.thickness,
+        young_modulus=args.young_modulus,
+    )
     for n in args.n:
-        case = hydrostatic_fsi_plate(n=n, depth=args.depth)
+        case = hydrostatic_fsi_plate(n=n, **plate)
         t_end = args.periods * case.info["dry_period"]
         row = dict(n=n, depth=case.info["depth"], dx=case.info["dx"], t_end=t_end)
+        row.update({k: v for k, v in plate.items() if k != "depth"})
+        row.update(float64=args.float64, end_columns_clamped=not args.free_end_columns)
+        row["face_weight"] = args.face_weight
+        row["h"] = float(case.model.smoothing_length)
         row["reference_deflection"] = case.info["reference_deflection"]
         if not args.no_dry:
-            row["dry"] = measure(dry_case(case), t_end)
+            if args.relax:  # the static value by relaxation only
+                row["dry"] = dict(relaxed=relaxed(dry_case(case), t_end))
+            else:
+                row["dry"] = measure(dry_case(case), t_end)
         for substeps in [] if args.dry_only else args.substeps:
             k = substeps if substeps == "auto" else int(substeps)
-            split = hydrostatic_fsi_plate(n=n, depth=args.depth, substeps=k)
+            split = hydrostatic_fsi_plate(n=n, **plate, substeps=k)
             row["fsi"] = dict(measure(split, t_end), substeps=split.info["substeps"])
             row["fsi"]["dt"] = split.dt
             print(json.dumps(row, default=str)[:400], flush=True)

@@ -97,12 +97,16 @@ def _column_indices(x, kind, x_probe, y_probe=None, dx=1.0):
     return column[dist < dist.min() + 1e-6 * dx]
 
 
-def _fluid_solid_state(fluid, walls, solid, clamped, dx, depth_of):
+def _fluid_solid_state(fluid, walls, solid, clamped, dx, depth_of, solid_weights=None):
     """``initial_state(params)``: hydrostatic fluid density ``rho(rho0 g (H - y))``
     (eq. 12 inverted; gravity along the last axis), masses ``rho dx^d``, the solid at its
-    reference density."""
+    reference density.  ``solid_weights``: the volumes (and masses) of the solid and
+    clamped particles over ``dx^d`` (default 1)."""
     x = np.concatenate([fluid, walls, solid, clamped])
     cell = dx ** x.shape[1]
+    if solid_weights is not None:
+        n_fluid_walls = len(fluid) + len(walls)
+        cell = cell * np.concatenate([np.ones(n_fluid_walls), solid_weights])
     kind = np.concatenate(
         [
             np.full(len(fluid), Kind.FLUID),
@@ -201,6 +205,32 @@ class _PlateSetUp:
     n_clamp: int
     tank_height: float
     points: tuple  # (fluid, walls, plate, clamped) [N, 2] lattices
+    placement: str = "cell"
+    face_weight: float = 1.0
+
+    @property
+    def body_thickness(self) -> float:
+        """The thickness the plate's rows of particles fill, ``dx`` per row and
+        ``face_weight dx`` per face row with surface placement: ``t`` with cell placement
+        and with surface placement's half-volume face rows."""
+        if self.placement == "cell":
+            return self.n * self.dx
+        return (self.n - 2 + 2 * self.face_weight) * self.dx
+
+    def volume_weights(self, plate_and_clamped) -> np.ndarray:
+        """Each plate or clamped particle's volume over ``dx^d``: ``face_weight`` on the
+        face rows with surface placement (trapezoidal rule through the thickness), else 1."""
+        v = plate_and_clamped[:, -1]
+        if self.placement == "cell":
+            return np.ones(len(v))
+        on_face = (np.abs(v) < 1e-6 * self.dx) | (np.abs(v + self.thickness) < 1e-6 * self.dx)
+        return np.where(on_face, self.face_weight, 1.0)
+
+    @property
+    def particle_density(self) -> float:
+        """The plate particles' density: ``rho_s t / (n dx)``, so that their mass per
+        unit length is the plate's, ``rho_s t`` (``rho_s`` with cell placement)."""
+        return self.solid_density * self.thickness / self.body_thickness
 
     @property
     def margin(self) -> float:
@@ -220,12 +250,26 @@ class _PlateSetUp:
         return 22.373 / self.length**2 * math.sqrt(D / (self.solid_density * t))
 
 
+#: with ``placement="surface"``, also clamp the plate's end columns (on ``x = 0`` and
+#: ``x = L``); ``False`` leaves them free, the clamp starting one spacing beyond each end
+#: (for measurements: docs/scripts/validate_fsi.py ``--free-end-columns``)
+CLAMP_END_COLUMNS = True
+#: with ``placement="surface"``, the volume (and mass) of a face-row particle over
+#: ``dx^d``: 1 (TrixiParticles' set-up); 0.5 is the trapezoidal rule through the thickness
+#: (for measurements: docs/scripts/validate_fsi.py ``--face-weight``)
+FACE_WEIGHT = 1.0
+
+
 def _plate_set_up(
-    n, length, thickness, depth, E, poisson_ratio, rho_s, rho_f, gravity, c_factor, kernel, h_f
-) -> _PlateSetUp:
+    n, length, thickness, depth, E, poisson_ratio, rho_s, rho_f, gravity, c_factor, kernel, h_f,
+    placement="cell",
+) -> _PlateSetUp:  # fmt: skip
     """The arguments of :func:`hydrostatic_fsi_plate` checked, rounded to whole particle
     spacings, and the plane lattices of fluid, side walls, plate and clamps."""
-    n = check_resolution("n", n, 2)
+    if placement not in ("cell", "surface"):
+        raise ValueError(f"placement must be 'cell' or 'surface', got {placement!r}")
+    surface = placement == "surface"
+    n = check_resolution("n", n, 3 if surface else 2)
     L = check_positive("length", length)
     t = check_positive("thickness", thickness)
     H = check_positive("depth", depth)
@@ -233,30 +277,44 @@ def _plate_set_up(
     rho_s = check_positive("solid_density", rho_s)
     rho_f = check_positive("fluid_density", rho_f)
     g = check_positive("gravity", gravity)
-    dx = t / n
+    dx = t / (n - 1) if surface else t / n
     nx = int(round(L / dx))
     L = nx * dx
     ny = int(round(H / dx))
     H = ny * dx
     kernel = as_kernel(kernel)
-    h = h_f * dx
+    if h_f is None:
+        h_f = 2**0.5 if surface else 1.2
+    h = check_positive("h_factor", h_f) * dx
     cutoff = kernel.support * h
     layers = wall_layers(cutoff, dx)
     n_clamp = 2 * layers
     tank_height = H + max(0.1 * H, 2 * cutoff)
     n_wall = int(math.ceil(tank_height / dx))
-    fluid = _rows(0.0, 0.0, nx, ny, dx)
+    # with surface placement the plate's top row lies on its face y = 0, one spacing below
+    # the fluid's first row: fluid and walls are the cell-centred ones lifted by dx / 2
+    lift = 0.5 * dx if surface else 0.0
+    fluid = _rows(0.0, lift, nx, ny, dx)
     walls = np.concatenate(
-        [_rows(-layers * dx, 0.0, layers, n_wall, dx), _rows(L, 0.0, layers, n_wall, dx)]
+        [_rows(-layers * dx, lift, layers, n_wall, dx), _rows(L, lift, layers, n_wall, dx)]
     )
-    plate = _rows(0.0, -t, nx, n, dx)
-    clamped = np.concatenate(
-        [_rows(-n_clamp * dx, -t, n_clamp, n, dx), _rows(L, -t, n_clamp, n, dx)]
-    )
+    if surface:
+        # rows on both faces and columns on both ends, spacing t / (n - 1)
+        columns = np.arange(-n_clamp, nx + n_clamp + 1) * dx
+        gx, gy = np.meshgrid(columns, -t + np.arange(n) * dx, indexing="ij")
+        sites = np.stack([gx.ravel(), gy.ravel()], axis=-1)
+        edge = 0.5 * dx if CLAMP_END_COLUMNS else -0.5 * dx
+        free = (sites[:, 0] > edge) & (sites[:, 0] < L - edge)
+        plate, clamped = sites[free], sites[~free]
+    else:
+        plate = _rows(0.0, -t, nx, n, dx)
+        clamped = np.concatenate(
+            [_rows(-n_clamp * dx, -t, n_clamp, n, dx), _rows(L, -t, n_clamp, n, dx)]
+        )
     c0 = c_factor * math.sqrt(g * H)
     return _PlateSetUp(
         n, dx, L, t, H, E, float(poisson_ratio), rho_s, rho_f, g, c0, kernel, h, layers,
-        n_clamp, tank_height, (fluid, walls, plate, clamped),
+        n_clamp, tank_height, (fluid, walls, plate, clamped), placement, FACE_WEIGHT,
     )  # fmt: skip
 
 
@@ -267,12 +325,19 @@ def _plate_case(
     (fluid, walls, plate, clamped; plane or extruded) in ``domain``."""
     fluid, walls, plate, clamped = points
     dim = fluid.shape[1]
+    # depth below the free surface: the fluid's top row lies dx / 2 under it
+    surface_level = s.depth + (0.5 * s.dx if s.placement == "surface" else 0.0)
+
+    def depth_of(x):
+        return surface_level - x[:, -1]
+
+    weights = s.volume_weights(np.concatenate([plate, clamped]))
     x, kind, initial_state = _fluid_solid_state(
-        fluid, walls, plate, clamped, s.dx, lambda x: s.depth - x[:, -1]
+        fluid, walls, plate, clamped, s.dx, depth_of, weights
     )
     params = _coupled_params(
         s.gravity, s.fluid_density, s.sound_speed, artificial_alpha, s.young_modulus,
-        s.poisson_ratio, s.solid_density, dim,
+        s.poisson_ratio, s.particle_density, dim,
     )  # fmt: skip
     model = _fsi_model(s.kernel, s.h, domain, WEAKLY_COMPRESSIBLE, "no_slip", False, True)
     omega = s.dry_omega
@@ -290,6 +355,9 @@ def _plate_case(
         thickness=s.thickness,
         depth=s.depth,
         gravity=s.gravity,
+        placement=s.placement,
+        solid_density=s.solid_density,
+        body_thickness=s.body_thickness,
         reference_deflection=float(reference),
         dry_period=period,
         midspan_indices=tuple(int(i) for i in _column_indices(x, kind, 0.5 * s.length, dx=s.dx)),
@@ -315,10 +383,11 @@ def hydrostatic_fsi_plate(
     sound_speed_factor: float = 10.0,
     artificial_alpha: float = 0.1,
     kernel="wendland_c2",
-    h_factor: float = 1.2,
+    h_factor: float | None = None,
     cfl: float = 0.5,
     t_end: float | None = None,
     substeps: int | str = 1,
+    placement: str = "cell",
 ) -> Case:
     """A water column of depth ``H`` resting on an elastic plate clamped at both ends
     (Fourey et al. 2017; O'Connor & Rogers 2021), plane strain.
@@ -334,18 +403,29 @@ def hydrostatic_fsi_plate(
     ``info["reference_deflection"]``), -7.05e-5 m with the defaults.
 
     Args:
-      n: particles through the plate thickness.
-      kernel, h_factor: kernel name and ``h = h_factor dx`` for fluid and solid.
+      n: particles through the plate thickness (``dx = t / n`` with the default cell
+        placement, ``t / (n - 1)`` with ``placement="surface"``).
+      kernel, h_factor: kernel name and ``h = h_factor dx`` for fluid and solid
+        (``None``: 1.2 with cell placement, ``sqrt(2)`` with surface placement).
       cfl: solid Courant number of the time step (the solid's sound speed sets it).
       t_end: default ``20`` periods of the plate's first dry bending mode.
       substeps: split integration (``SolidSystem.substeps``): the plate takes this many
         steps of its own per step, the step ``substeps`` times the solid's stable one (up
         to the fluid's); ``"auto"``: as many as fit in the fluid's stable step and in
         1/20 of the dry first-mode period.
+      placement: ``"cell"`` (the default: particles at the centres of square cells that
+        tile the plate, the clamped cells beyond its ends) or ``"surface"`` (``n`` rows
+        with the outer ones on the faces ``y = -t`` and ``y = 0`` and columns on
+        ``x = 0, ..., L``, as TrixiParticles.jl builds it; the columns on the ends and
+        beyond are clamped; fluid and walls lifted by ``dx / 2``, the fluid's first row one
+        spacing above the top face; the particles' density ``rho_s t / (t + dx)``, so that
+        the plate's mass per unit length is ``rho_s t``).  Cell placement errs soft in
+        bending, surface placement stiff, by about as much at 12 spacings through the
+        thickness (+11 % and -12 %; docs/validation_fsi.md).
     """
     plate = _plate_set_up(
         n, length, thickness, depth, young_modulus, poisson_ratio, solid_density,
-        fluid_density, gravity, sound_speed_factor, kernel, h_factor,
+        fluid_density, gravity, sound_speed_factor, kernel, h_factor, placement,
     )  # fmt: skip
     return _plate_case("hydrostatic_fsi_plate", plate, plate.points, plate.domain_2d,
                        artificial_alpha, cfl, t_end, substeps)  # fmt: skip
@@ -372,10 +452,11 @@ def hydrostatic_fsi_plate_3d(
     sound_speed_factor: float = 10.0,
     artificial_alpha: float = 0.1,
     kernel="wendland_c2",
-    h_factor: float = 1.2,
+    h_factor: float | None = None,
     cfl: float = 0.5,
     t_end: float | None = None,
     substeps: int | str = "auto",
+    placement: str = "cell",
 ) -> Case:
     """A water column resting on an elastic plate clamped at both ends, in 3D: the
     hydrostatic plate extruded across a tank, periodic along its span.
@@ -404,11 +485,11 @@ def hydrostatic_fsi_plate_3d(
         ``"auto"`` (unsplit, the plate's step would set the fluid's: 60 times more
         evaluations of the whole model).
 
-    The other arguments are :func:`hydrostatic_fsi_plate`'s.
+    The other arguments (``placement`` among them) are :func:`hydrostatic_fsi_plate`'s.
     """
     s = _plate_set_up(
         n, length, thickness, depth, young_modulus, poisson_ratio, solid_density,
-        fluid_density, gravity, sound_speed_factor, kernel, h_factor,
+        fluid_density, gravity, sound_speed_factor, kernel, h_factor, placement,
     )  # fmt: skip
     dx = s.dx
     least = max(4, math.ceil(2.5 * s.kernel.support * s.h / dx - 1e-9))
