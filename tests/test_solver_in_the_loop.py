@@ -41,6 +41,7 @@ def test_zero_initialised_correction_is_the_coarse_solver_and_training_lowers_th
     result = sil.train(problem, net, unroll=4, iterations=12, lr=1e-2, log=lambda s: None)
     losses = np.asarray(result.losses)
     assert np.isfinite(losses).all() and result.iterations == 12
+    assert 0 < result.cpu_seconds and 0 < result.seconds
     assert losses[-3:].mean() < 0.9 * losses[0]
     trained = sil.errors(problem, result.net)
     assert trained[0, -1] < coarse[0, -1]
@@ -51,6 +52,8 @@ def test_bad_arguments_are_named(problem):
         sil.train(problem, sil.Corrector(problem, jax.random.PRNGKey(0)), unroll=5, iterations=1)
     with pytest.raises(ValueError, match="mode must be one of"):
         sil.Corrector(problem, jax.random.PRNGKey(0), mode="hybrid")
+    with pytest.raises(ValueError, match="scale must be a positive velocity"):
+        sil.Corrector(problem, jax.random.PRNGKey(0), scale=0.0)
     with pytest.raises(ValueError, match="ratio must be a positive integer"):
         sil.make_problem(problem.coarse, problem.fine, horizon=2, ratio=0, viscosities=[0.01])
     with pytest.raises(ValueError, match="viscosities or conditions, not both"):

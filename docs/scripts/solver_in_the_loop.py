@@ -44,10 +44,16 @@ def main(argv=None) -> dict:
     p.add_argument("--test-alpha", type=float, default=0.1)
     p.add_argument("--latent", type=int, default=16)
     p.add_argument("--lr", type=float, default=1e-3)
+    p.add_argument(
+        "--gravity-scale",
+        action="store_true",
+        help="correction of |g| dt per unit output (default 0.01 U; flows from rest)",
+    )
     p.add_argument("--fine-seeds", type=int, default=4, help="fine runs averaged (disorders)")
     p.add_argument(
         "--networks", nargs="+", default=["correction", "gns"], choices=["correction", "gns"]
     )
+    p.add_argument("--figure", default=None, help="PNG of the error curves (optional)")
     p.add_argument("--small", action="store_true", help="a minute-long smoke run")
     args = p.parse_args(argv)
     if args.small:
@@ -87,7 +93,12 @@ def main(argv=None) -> dict:
     curves = {"coarse solver": sil.errors(test_problem, None)[0]}
     names = {"correction": "solver + correction", "gns": "pure GNS"}
     for mode, name in [(m, names[m]) for m in args.networks]:
-        net = sil.Corrector(train_problem, jax.random.PRNGKey(0), mode=mode, latent=args.latent)
+        scale = None
+        if args.gravity_scale and mode == "correction":
+            scale = float(np.linalg.norm(np.asarray(coarse.params.gravity))) * train_problem.dt
+        net = sil.Corrector(
+            train_problem, jax.random.PRNGKey(0), mode=mode, latent=args.latent, scale=scale
+        )
         res = sil.train(
             train_problem, net, mode=mode, unroll=args.unroll, seconds=args.seconds, lr=args.lr
         )
@@ -95,6 +106,8 @@ def main(argv=None) -> dict:
         results[f"{name} training"] = dict(
             iterations=res.iterations,
             seconds=res.seconds,
+            cpu_seconds=res.cpu_seconds,
+            losses=res.losses,
             final_loss=float(np.mean(res.losses[-10:])),
         )
     for name, curve in curves.items():
@@ -112,6 +125,10 @@ def main(argv=None) -> dict:
     }
     Path(args.out).parent.mkdir(parents=True, exist_ok=True)
     Path(args.out).write_text(json.dumps(results, indent=1))
+    if args.figure is not None:
+        from surrogate_figures import plot_sil  # the same plot as the Taylor-Green page
+
+        plot_sil(results, Path(args.figure))
     for name in curves:
         print(name, {k: round(v, 4) for k, v in results[name].items() if k != "curve"})
     return results
