@@ -507,3 +507,15 @@ def test_strain_energy_is_exact_for_an_affine_stretch_and_zero_at_rest():
     linear = case.replace(model=case.model.replace(systems=systems))
     with pytest.raises(ValueError, match="tait_internal_energy needs a fluid with TaitEOS"):
         observables.tait_internal_energy(state, linear)
+
+
+def test_surface_only_plate_options_are_named():
+    """The surface placement's measurement options are refused, in one line, where they
+    mean nothing, and a bad face weight is named."""
+    with pytest.raises(ValueError, match="^face_weight and clamp_end_columns apply to"):
+        hydrostatic_fsi_plate(n=2, face_weight=0.5)
+    with pytest.raises(ValueError, match="^face_weight must be"):
+        hydrostatic_fsi_plate(n=3, placement="surface", face_weight=0.0)
+    free = hydrostatic_fsi_plate(n=3, placement="surface", clamp_end_columns=False)
+    held = hydrostatic_fsi_plate(n=3, placement="surface")
+    assert free.info["n_solid"] == held.info["n_solid"] + 2 * 3  # the two end columns

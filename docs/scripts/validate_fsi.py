@@ -329,9 +329,6 @@ def main(argv=None):
         p.error("--out is required with --case plate")
     if args.float64:
         jax.config.update("jax_enable_x64", True)
-    if args.free_end_columns:
-        sphjax.cases.fsi.CLAMP_END_COLUMNS = False
-    sphjax.cases.fsi.FACE_WEIGHT = args.face_weight
     plate = dict(
         depth=args.depth,
         placement=args.placement,
@@ -340,6 +337,8 @@ def main(argv=None):
         thickness=args.thickness,
         young_modulus=args.young_modulus,
     )
+    if args.placement == "surface":
+        plate.update(face_weight=args.face_weight, clamp_end_columns=not args.free_end_columns)
     for n in args.n:
         case = hydrostatic_fsi_plate(n=n, **plate)
         t_end = args.periods * case.info["dry_period"]

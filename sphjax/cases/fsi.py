@@ -228,8 +228,9 @@ class _PlateSetUp:
 
     @property
     def particle_density(self) -> float:
-        """The plate particles' density: ``rho_s t / (n dx)``, so that their mass per
-        unit length is the plate's, ``rho_s t`` (``rho_s`` with cell placement)."""
+        """The plate particles' density: ``rho_s t`` over the thickness their rows fill
+        (:attr:`body_thickness`), so that their mass per unit length is the plate's,
+        ``rho_s t`` (``rho_s`` with cell placement)."""
         return self.solid_density * self.thickness / self.body_thickness
 
     @property
@@ -250,25 +251,21 @@ class _PlateSetUp:
         return 22.373 / self.length**2 * math.sqrt(D / (self.solid_density * t))
 
 
-#: with ``placement="surface"``, also clamp the plate's end columns (on ``x = 0`` and
-#: ``x = L``); ``False`` leaves them free, the clamp starting one spacing beyond each end
-#: (for measurements: docs/scripts/validate_fsi.py ``--free-end-columns``)
-CLAMP_END_COLUMNS = True
-#: with ``placement="surface"``, the volume (and mass) of a face-row particle over
-#: ``dx^d``: 1 (TrixiParticles' set-up); 0.5 is the trapezoidal rule through the thickness
-#: (for measurements: docs/scripts/validate_fsi.py ``--face-weight``)
-FACE_WEIGHT = 1.0
-
-
 def _plate_set_up(
     n, length, thickness, depth, E, poisson_ratio, rho_s, rho_f, gravity, c_factor, kernel, h_f,
-    placement="cell",
+    placement="cell", face_weight=1.0, clamp_end_columns=True,
 ) -> _PlateSetUp:  # fmt: skip
     """The arguments of :func:`hydrostatic_fsi_plate` checked, rounded to whole particle
     spacings, and the plane lattices of fluid, side walls, plate and clamps."""
     if placement not in ("cell", "surface"):
         raise ValueError(f"placement must be 'cell' or 'surface', got {placement!r}")
     surface = placement == "surface"
+    face_weight = check_positive("face_weight", face_weight)
+    if not surface and (face_weight != 1.0 or not clamp_end_columns):
+        raise ValueError(
+            "face_weight and clamp_end_columns apply to placement='surface' only; "
+            "leave them at 1.0 and True or pass placement='surface'"
+        )
     n = check_resolution("n", n, 3 if surface else 2)
     L = check_positive("length", length)
     t = check_positive("thickness", thickness)
@@ -303,7 +300,7 @@ def _plate_set_up(
         columns = np.arange(-n_clamp, nx + n_clamp + 1) * dx
         gx, gy = np.meshgrid(columns, -t + np.arange(n) * dx, indexing="ij")
         sites = np.stack([gx.ravel(), gy.ravel()], axis=-1)
-        edge = 0.5 * dx if CLAMP_END_COLUMNS else -0.5 * dx
+        edge = 0.5 * dx if clamp_end_columns else -0.5 * dx
         free = (sites[:, 0] > edge) & (sites[:, 0] < L - edge)
         plate, clamped = sites[free], sites[~free]
     else:
@@ -314,7 +311,7 @@ def _plate_set_up(
     c0 = c_factor * math.sqrt(g * H)
     return _PlateSetUp(
         n, dx, L, t, H, E, float(poisson_ratio), rho_s, rho_f, g, c0, kernel, h, layers,
-        n_clamp, tank_height, (fluid, walls, plate, clamped), placement, FACE_WEIGHT,
+        n_clamp, tank_height, (fluid, walls, plate, clamped), placement, face_weight,
     )  # fmt: skip
 
 
@@ -388,6 +385,9 @@ def hydrostatic_fsi_plate(
     t_end: float | None = None,
     substeps: int | str = 1,
     placement: str = "cell",
+    *,
+    face_weight: float = 1.0,
+    clamp_end_columns: bool = True,
 ) -> Case:
     """A water column of depth ``H`` resting on an elastic plate clamped at both ends
     (Fourey et al. 2017; O'Connor & Rogers 2021), plane strain.
@@ -422,10 +422,17 @@ def hydrostatic_fsi_plate(
         the plate's mass per unit length is ``rho_s t``).  Cell placement errs soft in
         bending, surface placement stiff, by about as much at 12 spacings through the
         thickness (+11 % and -12 %; docs/validation_fsi.md).
+      face_weight: with ``placement="surface"``, the volume (and mass) of a face-row
+        particle over ``dx^d``: 1 (TrixiParticles' set-up); 0.5 is the trapezoidal rule
+        through the thickness.  For measurements (docs/scripts/validate_fsi.py).
+      clamp_end_columns: with ``placement="surface"``, clamp the columns on ``x = 0`` and
+        ``x = L`` too; ``False`` leaves them free, the clamp starting one spacing beyond
+        each end.  For measurements.
     """
     plate = _plate_set_up(
         n, length, thickness, depth, young_modulus, poisson_ratio, solid_density,
         fluid_density, gravity, sound_speed_factor, kernel, h_factor, placement,
+        face_weight, clamp_end_columns,
     )  # fmt: skip
     return _plate_case("hydrostatic_fsi_plate", plate, plate.points, plate.domain_2d,
                        artificial_alpha, cfl, t_end, substeps)  # fmt: skip
