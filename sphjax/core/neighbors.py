@@ -96,20 +96,32 @@ class NeighborSearch:
                 format=partition.Dense,
             )
 
-    def allocate(self, position, extra_capacity: int = 0, margin: float | None = None):
+    def allocate(
+        self,
+        position,
+        extra_capacity: int = 0,
+        margin: float | None = None,
+        at_least: int = 0,
+    ):
         """A new neighbour list for concrete ``position`` (outside ``jit``).
 
         ``margin``: ``None`` sizes the list ``Model.neighbor_capacity`` times the largest
         neighbour count now, plus ``extra_capacity``; a number sizes it the largest count
         times ``1 + margin``, plus ``extra_capacity`` (for a driver that re-allocates on
         overflow: fewer padded slots, each of which costs as much as a neighbour).
+        ``at_least``: the fewest slots per particle (a size measured elsewhere, e.g. where
+        an earlier list overflowed).
         """
         fns = self._functions(self.skin)
-        neighbors = fns.allocate(self.to_box(jnp.asarray(position)), extra_capacity=extra_capacity)
+        x = self.to_box(jnp.asarray(position))
+        neighbors = fns.allocate(x, extra_capacity=extra_capacity)
+        if capacity(neighbors) < at_least:
+            more = extra_capacity + at_least - capacity(neighbors)
+            neighbors = fns.allocate(x, extra_capacity=more)
         if margin is not None:
             n = neighbors.idx.shape[0]
             most = int(jnp.max(jnp.sum(neighbors.idx < n, axis=1), initial=0))
-            width = max(1, int(math.ceil(most * (1.0 + margin))) + int(extra_capacity))
+            width = max(1, int(math.ceil(most * (1.0 + margin))) + int(extra_capacity), at_least)
             if width < capacity(neighbors):
                 # jax-md packs each row's neighbours first: the columns cut hold padding
                 neighbors = neighbors.set(idx=neighbors.idx[:, :width], max_occupancy=width)

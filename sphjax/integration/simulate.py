@@ -25,7 +25,6 @@ import numpy as np
 from sphjax.core import ordering
 from sphjax.core.case import Case
 from sphjax.core.model import Model
-from sphjax.core.neighbors import capacity
 from sphjax.core.params import Params
 from sphjax.core.state import State, Trajectory
 from sphjax.integration import split
@@ -34,13 +33,16 @@ from sphjax.integration.timestep import check_time_step
 from sphjax.physics.rhs import (
     NEIGHBOR_IDX,
     UPDATE_FIELDS,
+    ListSizes,
     Neighbors,
     build_neighbors,
     check_params,
     evaluate,
+    list_sizes,
     overflowed,
     system_blocks,
     update_neighbors,
+    widest,
     with_reference,
 )
 
@@ -410,8 +412,13 @@ def _simulate_in_chunks(
 
 
 def _run_chunk_growing(carry, dt, params, model, save_every, n_frames, extra):
-    """One compiled chunk; on a neighbour-list overflow, re-allocate with more room (``extra``
-    grows on every retry and is kept for later chunks) and repeat it."""
+    """One compiled chunk; on a neighbour-list overflow, re-allocate and repeat it.
+
+    The split lists are re-allocated from the most neighbours (and rows with neighbours)
+    they met during the chunk (``Neighbors.counts``; a dam break's fluid spreading along
+    the floor meets ever more wall particles), so one re-allocation, one compilation, is
+    enough for them.  An overflow of the search itself, which jax-md does not count,
+    raises ``extra``, kept for later chunks."""
     for _attempt in range(10):
         new_carry, frames = _run_chunk(
             carry,
@@ -425,21 +432,62 @@ def _run_chunk_growing(carry, dt, params, model, save_every, n_frames, extra):
         if not bool(overflowed(new_carry[1])):
             return new_carry, frames
         state, neighbors, _, step = carry
-        old = capacity(neighbors.search)
-        # grow on every retry: the chunk's start positions may need less room than the
-        # positions where it overflowed
-        extra[0] = max(extra[0] + old // 2, 2)
+        old = list_sizes(neighbors)
+        if bool(new_carry[1].search.did_buffer_overflow):
+            extra[0] = max(extra[0] + old.search // 2, 2)
         neighbors = build_neighbors(
-            state, model, extra_capacity=extra[0], compact_rows=True, margin=NEIGHBOR_MARGIN
+            state,
+            model,
+            extra_capacity=extra[0],
+            compact_rows=True,
+            margin=NEIGHBOR_MARGIN,
+            at_least=widest(old, _needed(new_carry[1], model, extra[0])),
         )
         neighbors = neighbors.replace(reference=carry[1].reference)
         carry = (state, neighbors, *carry[2:])
         warnings.warn(
-            f"neighbour list overflowed near step {int(step)}; re-allocated "
-            f"{old} -> {capacity(neighbors.search)} slots and repeated the chunk",
+            f"neighbour list overflowed in the chunk from step {int(step)}; re-allocated "
+            f"({_growth(old, list_sizes(neighbors), model)}) and repeated the chunk",
             stacklevel=4,
         )
     raise NeighborOverflowError("neighbour list kept overflowing; raise Model.neighbor_capacity")
+
+
+def _growth(old: ListSizes, new: ListSizes, model) -> str:
+    """What a re-allocation changed, in words."""
+
+    def name(i, j):
+        systems = (model.systems[i], model.systems[j])
+        return "-".join(type(x).__name__.removesuffix("System").lower() for x in systems)
+
+    changes = [f"search {old.search} -> {new.search} slots per particle"]
+    changes += [
+        f"{name(*key)} {old.widths.get(key, 0)} -> {width} slots"
+        for key, width in new.widths.items()
+        if width != old.widths.get(key, 0)
+    ]
+    changes += [
+        f"{name(*key)} {old.members.get(key, 0)} -> {rows} rows"
+        for key, rows in new.members.items()
+        if rows != old.members.get(key, 0)
+    ]
+    return ", ".join(changes)
+
+
+def _needed(neighbors: Neighbors, model, extra: int) -> ListSizes:
+    """The split and compacted list sizes for the counts ``neighbors`` met (sized as an
+    allocation sizes them from the counts it measures)."""
+    counts = [int(c) for c in np.asarray(neighbors.counts)]
+    width = len(neighbors.capacities)
+    widths = {
+        key: int(math.ceil(c * (1.0 + NEIGHBOR_MARGIN))) + extra
+        for (key, _), c in zip(neighbors.capacities, counts[:width], strict=True)
+    }
+    members = {
+        key: int(math.ceil(c * model.neighbor_capacity)) + extra
+        for (key, _), c in zip(neighbors.member_capacities, counts[width:], strict=True)
+    }
+    return ListSizes(0, widths, members)
 
 
 def _check_finite(state: State) -> None:

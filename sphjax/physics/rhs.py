@@ -21,6 +21,7 @@ jax-md cell list, and the reference configuration within a solid.
 from __future__ import annotations
 
 import dataclasses
+from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
@@ -123,6 +124,9 @@ class Neighbors:
         over them.
       skin: ``{(i, i): PairList}`` the skin level of those lists.
       support_origin: ``[N, d]`` the positions at which they were last compacted.
+      counts: ``[len(capacities) + len(member_capacities)]`` the most neighbours a row of
+        each split list has had since the allocation, then the most rows with neighbours
+        each compacted list has had (:func:`split_counts`): what a re-allocation needs.
     """
 
     search: object
@@ -136,6 +140,7 @@ class Neighbors:
     support_capacities: tuple = ()
     skin: dict | None = None
     support_origin: jax.Array | None = None
+    counts: jax.Array | None = None
 
 
 #: compact a list's rows when at most this fraction of them has neighbours
@@ -185,6 +190,7 @@ def build_neighbors(
     compact_rows: bool = False,
     margin: float | None = None,
     support: bool | None = None,
+    at_least: ListSizes | None = None,
 ) -> Neighbors:
     """Allocate neighbour data for concrete ``state`` (outside ``jit``).
 
@@ -206,7 +212,12 @@ def build_neighbors(
     support; measured on the 10,000-particle Taylor-Green: reverse mode about 15 %
     cheaper).  The chunked driver's lists are already tight, and there the compaction
     costs about what it saves.
+
+    ``at_least``: lists no smaller than these :class:`ListSizes` (same model): the chunked
+    driver passes the sizes measured where a chunk overflowed, so that one re-allocation
+    is enough.
     """
+    floor = at_least if at_least is not None else ListSizes(0, {}, {})
     blocks = system_blocks(state.kind, model)
     wanted = neighbor_pairs(model)
     current = [i for i in _current(model) if blocks[i][1] > blocks[i][0]]
@@ -215,7 +226,7 @@ def build_neighbors(
     if current:
         union = (blocks[current[0]][0], blocks[current[-1]][1])
         search = neighbor_search(model).allocate(
-            state.position[union[0] : union[1]], extra_capacity, margin
+            state.position[union[0] : union[1]], extra_capacity, margin, floor.search
         )
         for i, j in wanted:
             if i in current and j in current and len(current) > 1 and _searched_pair(model, i, j):
@@ -226,6 +237,7 @@ def build_neighbors(
                     multiplier,
                     extra_capacity,
                 )
+                width = max(width, floor.widths.get((i, j), 0))
                 capacities.append(((i, j), min(width, capacity(search))))
     member_capacities = []
     for (i, j), _ in capacities if compact_rows else ():
@@ -237,6 +249,7 @@ def build_neighbors(
                 model.neighbor_capacity,
                 extra_capacity,
             )
+            members = max(members, floor.members.get((i, j), 0))
             if members < _COMPACT_BELOW * _size(blocks[i]):
                 member_capacities.append(((i, j), members))
     neighbors = Neighbors(
@@ -271,11 +284,13 @@ def build_neighbors(
             )
             if width < skin_idx.shape[1]:
                 support_capacities.append((key, width))
+    counts = split_counts(neighbors)
     neighbors = dataclasses.replace(
         neighbors,
         pairs=pair_lists,
-        overflow=_split_overflow(neighbors, model),
+        overflow=_counts_overflow(counts, neighbors),
         support_capacities=tuple(support_capacities),
+        counts=counts,
     )
     supported, overflow = _support(pair_lists, state.position, neighbors, model)
     return dataclasses.replace(
@@ -284,6 +299,37 @@ def build_neighbors(
         skin={k: pair_lists[k] for k in supported} or None,
         overflow=neighbors.overflow | overflow,
         support_origin=jnp.asarray(state.position) if supported else None,
+    )
+
+
+class ListSizes(NamedTuple):
+    """The sizes a neighbour allocation chose: slots per particle of the search, width
+    per pair of systems, compacted rows per pair (:func:`build_neighbors`)."""
+
+    search: int
+    widths: dict
+    members: dict
+
+
+def list_sizes(neighbors: Neighbors) -> ListSizes:
+    """The :class:`ListSizes` of ``neighbors``; a list not compacted counts all its rows
+    (so that an allocation held to it does not compact it either)."""
+    search = 0 if neighbors.search is None else capacity(neighbors.search)
+    members = {(i, j): _size(neighbors.blocks[i]) for (i, j), _ in neighbors.capacities if i < j}
+    members.update(neighbors.member_capacities)
+    return ListSizes(search, dict(neighbors.capacities), members)
+
+
+def widest(*sizes: ListSizes) -> ListSizes:
+    """Component-wise the largest of ``sizes``."""
+
+    def most(dicts):
+        return {k: max(d.get(k, 0) for d in dicts) for d in dicts for k in d}
+
+    return ListSizes(
+        max(s.search for s in sizes),
+        most([s.widths for s in sizes]),
+        most([s.members for s in sizes]),
     )
 
 
@@ -341,20 +387,30 @@ def _current_keys(neighbors: Neighbors, model):
     return {k for k in neighbors.pairs if _searched_pair(model, *k)}
 
 
-def _split_overflow(neighbors: Neighbors, model):
+def split_counts(neighbors: Neighbors) -> jax.Array:
+    """The most neighbours a row of each split list has in ``neighbors.search`` now (in
+    the order of ``neighbors.capacities``), then how many rows of each compacted list
+    have neighbours (order of ``neighbors.member_capacities``)."""
     if neighbors.search is None:
-        return jnp.asarray(False)
-    blocks, union = neighbors.blocks, neighbors.union
-    flags = [jnp.asarray(False)]
-    members = dict(neighbors.member_capacities)
-    for (i, j), width in neighbors.capacities:
-        lst, overflow = split_list(
-            neighbors.search.idx, _local(blocks[i], union), _local(blocks[j], union), width
-        )
-        flags.append(overflow)
-        if (i, j) in members:
-            flags.append(compact_rows(lst, _size(blocks[j]), members[(i, j)])[3])
-    return jnp.any(jnp.stack(flags))
+        return jnp.zeros(0, jnp.int32)
+    blocks, union, idx = neighbors.blocks, neighbors.union, neighbors.search.idx
+
+    def inside(i, j):
+        rows, cols = _local(blocks[i], union), _local(blocks[j], union)
+        block = idx[rows[0] : rows[1]]
+        return (block >= cols[0]) & (block < cols[1])
+
+    widths = [
+        jnp.max(jnp.sum(inside(i, j), axis=1), initial=0) for (i, j), _ in neighbors.capacities
+    ]
+    rows = [jnp.sum(jnp.any(inside(i, j), axis=1)) for (i, j), _ in neighbors.member_capacities]
+    return jnp.asarray(widths + rows, jnp.int32).reshape(-1)
+
+
+def _counts_overflow(counts, neighbors: Neighbors):
+    """Whether ``counts`` (:func:`split_counts`) exceed the capacities of ``neighbors``."""
+    sizes = [w for _, w in neighbors.capacities] + [m for _, m in neighbors.member_capacities]
+    return jnp.any(counts > jnp.asarray(sizes, jnp.int32).reshape(-1))
 
 
 def with_reference(state: State, neighbors: Neighbors, model) -> Neighbors:
@@ -391,26 +447,28 @@ def update_neighbors(position, neighbors: Neighbors, model, rebuild=False) -> Ne
     refreshed = dataclasses.replace(neighbors, search=new)
     skin = neighbors.skin or {}
     rebuilt = True if rebuild else jnp.any(new.reference_position != old.reference_position)
+    counts = neighbors.counts
     if not neighbors.capacities:
         current, overflow = _split(refreshed, model), neighbors.overflow
     else:
 
         def split(_):
-            return _split(refreshed, model), _split_overflow(refreshed, model)
+            return _split(refreshed, model), split_counts(refreshed)
 
         def keep(_):
             keys = _current_keys(neighbors, model)
             current = {k: skin.get(k, v) for k, v in neighbors.pairs.items() if k in keys}
-            return current, neighbors.overflow
+            return current, neighbors.counts
 
         if rebuild:
-            current, overflow = split(None)
+            current, counts = split(None)
         else:
-            current, overflow = jax.lax.cond(rebuilt, split, keep, None)
+            current, counts = jax.lax.cond(rebuilt, split, keep, None)
         current = jax.tree_util.tree_map(lambda a: checkpoint_name(a, NEIGHBOR_IDX), current)
-        overflow = overflow | neighbors.overflow
+        counts = jnp.maximum(counts, neighbors.counts)
+        overflow = _counts_overflow(counts, neighbors) | neighbors.overflow
     refreshed = dataclasses.replace(
-        refreshed, pairs={**neighbors.pairs, **current}, overflow=overflow
+        refreshed, pairs={**neighbors.pairs, **current}, overflow=overflow, counts=counts
     )
     if not neighbors.support_capacities:
         return refreshed
