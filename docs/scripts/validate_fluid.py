@@ -525,7 +525,7 @@ def main():
     parser.add_argument(
         "--float32",
         action="store_true",
-        help="run in float32 (the Taylor-Green KE error is the same to 0.01 %)",
+        help="run in float32 (the Taylor-Green KE error is the same to 0.01 %%)",
     )
     parser.add_argument(
         "--cases",
