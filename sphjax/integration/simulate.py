@@ -1,11 +1,13 @@
 """``simulate``: a Case run by the kick-drift-kick step in a ``lax.scan``.
 
-With concrete inputs it runs in compiled chunks: after each chunk it checks for
-neighbour-list overflow (re-allocating and repeating the chunk) and for an unstable run
-(NaN, a particle leaving the domain), and hands finished frames to ``on_frames`` (the HDF5
-writer).  Under ``jax.grad``, ``jit`` or ``vmap`` it is a single ``lax.scan`` whose steps
-are rematerialised in reverse mode (and, with ``checkpoint_every``, chunks of steps too),
-with the same checks raised from inside the computation.
+With concrete inputs it runs in compiled chunks, each a ``lax.while_loop`` over steps that
+stops early at the first step whose neighbour lists overflowed (that step is not taken;
+the lists are re-allocated and the run goes on from the step before) or that went unstable
+(NaN, a particle leaving the domain: the run stops there); finished frames go to
+``on_frames`` (the HDF5 writer).  Under ``jax.grad``, ``jit`` or ``vmap`` it is a single
+``lax.scan`` whose steps are rematerialised in reverse mode (and, with
+``checkpoint_every``, chunks of steps too), with the same checks raised from inside the
+computation.
 
 Frames are saved every ``save_every`` steps and at the last step.
 """
@@ -161,8 +163,49 @@ def _run_frames(carry, dt, params, *, model, save_every, n_frames, checkpoint_ev
 
 _with_reference = jax.jit(with_reference, static_argnames="model")
 
+
+def _run_until_stopped(carry, frames, dt, params, start, stop, *, model, save_every):
+    """Steps from ``carry = (state, neighbors, failure, step)`` until step ``stop``, the
+    first unstable step, or the first step whose neighbour lists overflowed, saving the
+    state after every step ``start + k save_every`` in ``frames[k - 1]``.
+
+    An overflowing step is not taken: the state, failure and step are those before it, and
+    the overflowed lists are returned for their counts (what a re-allocation needs).
+    Returns ``(carry, frames)``."""
+
+    def running(loop):
+        (_, neighbors, failure, step), _ = loop
+        return (step < stop) & (failure[0] < 0) & ~overflowed(neighbors).astype(bool)
+
+    def one_step(loop):
+        carry, frames = loop
+        stepped = _step_with_checks(carry, dt, model, params)
+        lost = overflowed(stepped[1]).astype(bool)
+        state, _, failure, step = jax.tree_util.tree_map(
+            lambda old, new: jnp.where(lost, old, new),
+            (carry[0], None, carry[2], carry[3]),
+            (stepped[0], None, stepped[2], stepped[3]),
+        )
+        slot, phase = jnp.divmod(step - start, save_every)
+        saved = (phase == 0) & (slot > 0) & ~lost
+        slot = jnp.clip(slot - 1, 0, frames.position.shape[0] - 1)
+        frames = jax.tree_util.tree_map(
+            lambda buffer, x: jax.lax.dynamic_update_index_in_dim(
+                buffer,
+                jnp.where(saved, x, jax.lax.dynamic_index_in_dim(buffer, slot, keepdims=False)),
+                slot,
+                0,
+            ),
+            frames,
+            state,
+        )
+        return (state, stepped[1], failure, step), frames
+
+    return jax.lax.while_loop(running, one_step, (carry, frames))
+
+
 _run_chunk = jax.jit(
-    _run_frames, static_argnames=("model", "save_every", "n_frames", "checkpoint_every")
+    _run_until_stopped, static_argnames=("model", "save_every"), donate_argnums=(1,)
 )
 
 
@@ -391,8 +434,11 @@ def _simulate_in_chunks(
         done = 0
         while done < n_frames:
             k = min(frames_per_chunk, n_frames - done)
-            carry, frames = _run_chunk_growing(carry, dt, params, model, save_every, k, extra)
-            end_steps = base + (done + 1 + np.arange(k)) * save_every
+            start = base + done * save_every
+            carry, frames = _run_chunk_growing(
+                carry, dt, params, model, save_every, k, start, extra
+            )
+            end_steps = start + (1 + np.arange(k)) * save_every
             frame_times = jnp.asarray(end_steps, dt.dtype) * dt
             fail_step = int(carry[2][0])
             if fail_step >= 0:
@@ -411,29 +457,34 @@ def _simulate_in_chunks(
     return _stack(all_frames)
 
 
-def _run_chunk_growing(carry, dt, params, model, save_every, n_frames, extra):
-    """One compiled chunk; on a neighbour-list overflow, re-allocate and repeat it.
+def _run_chunk_growing(carry, dt, params, model, save_every, n_frames, start, extra):
+    """``n_frames`` frames of ``save_every`` steps from step ``start``; at a neighbour-list
+    overflow, re-allocate and go on from the step before it.
 
     The split lists are re-allocated from the most neighbours (and rows with neighbours)
-    they met during the chunk (``Neighbors.counts``; a dam break's fluid spreading along
-    the floor meets ever more wall particles), so one re-allocation, one compilation, is
-    enough for them.  An overflow of the search itself, which jax-md does not count,
-    raises ``extra``, kept for later chunks."""
-    for _attempt in range(10):
-        new_carry, frames = _run_chunk(
-            carry,
-            dt,
-            params,
-            model=model,
-            save_every=save_every,
-            n_frames=n_frames,
-            checkpoint_every=None,
+    they met (``Neighbors.counts``, the overflowing step's included; a dam break's fluid
+    spreading along the floor meets ever more wall particles).  An overflow of the search
+    itself, which jax-md does not count, raises ``extra``, kept for later chunks.  Returns
+    the last carry and the frames (those after an unstable step are not filled)."""
+    frames = jax.tree_util.tree_map(lambda x: jnp.zeros((n_frames, *x.shape), x.dtype), carry[0])
+    stop = start + n_frames * save_every
+    stuck = 0  # re-allocations at the same step
+    while True:
+        before = int(carry[3])
+        carry, frames = _run_chunk(
+            carry, frames, dt, params, start, stop, model=model, save_every=save_every
         )
-        if not bool(overflowed(new_carry[1])):
-            return new_carry, frames
-        state, neighbors, _, step = carry
-        old = list_sizes(neighbors)
-        if bool(new_carry[1].search.did_buffer_overflow):
+        state, lost, _, step = carry
+        if not bool(overflowed(lost)):
+            return carry, frames
+        stuck = stuck + 1 if int(step) == before else 0
+        if stuck >= 10:
+            raise NeighborOverflowError(
+                f"neighbour list kept overflowing at step {int(step) + 1}; raise "
+                "Model.neighbor_capacity"
+            )
+        old = list_sizes(lost)
+        if bool(lost.search.did_buffer_overflow):
             extra[0] = max(extra[0] + old.search // 2, 2)
         neighbors = build_neighbors(
             state,
@@ -441,16 +492,15 @@ def _run_chunk_growing(carry, dt, params, model, save_every, n_frames, extra):
             extra_capacity=extra[0],
             compact_rows=True,
             margin=NEIGHBOR_MARGIN,
-            at_least=widest(old, _needed(new_carry[1], model, extra[0])),
+            at_least=widest(old, _needed(lost, model, extra[0])),
         )
-        neighbors = neighbors.replace(reference=carry[1].reference)
+        neighbors = neighbors.replace(reference=lost.reference)
         carry = (state, neighbors, *carry[2:])
         warnings.warn(
-            f"neighbour list overflowed in the chunk from step {int(step)}; re-allocated "
-            f"({_growth(old, list_sizes(neighbors), model)}) and repeated the chunk",
+            f"neighbour list overflowed at step {int(step) + 1}; re-allocated "
+            f"({_growth(old, list_sizes(neighbors), model)}) and went on from step {int(step)}",
             stacklevel=4,
         )
-    raise NeighborOverflowError("neighbour list kept overflowing; raise Model.neighbor_capacity")
 
 
 def _growth(old: ListSizes, new: ListSizes, model) -> str:
