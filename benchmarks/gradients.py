@@ -13,7 +13,10 @@ For a Taylor-Green vortex of ``n_side**2`` particles (float32 by default) this m
   (``Model.pair_adjoint=False``) instead of their custom adjoint
   (:mod:`sphjax.physics.pairs`), for comparison;
 * with ``--case dam_break``, the dam break (walls, continuity density, Monaghan viscosity,
-  delta-SPH; ``n`` particles across the column), derivative w.r.t. ``artificial_alpha``.
+  delta-SPH; ``n`` particles across the column), derivative w.r.t. ``artificial_alpha``;
+  with ``--case oscillating_plate`` (the elastic solid, eqs. 14-19, ``n`` particles along
+  the plate's length) and ``--case hydrostatic_fsi_plate`` (fluid, walls and an elastic
+  plate, coupled; ``n`` particles through the plate), w.r.t. ``young_modulus``.
 
 Each configuration runs in its own subprocess, so the peak RSS belongs to it alone.
 
@@ -41,6 +44,8 @@ import time
 CASES = {
     "taylor_green": ("taylor_green", "kinematic_viscosity"),
     "dam_break": ("dam_break", "artificial_alpha"),
+    "oscillating_plate": ("oscillating_plate", "young_modulus"),
+    "hydrostatic_fsi_plate": ("hydrostatic_fsi_plate", "young_modulus"),
 }
 
 

@@ -419,7 +419,8 @@ def test_plate_tip_displacement_gradient_wrt_young_modulus_and_poisson_ratio():
 
 def test_custom_adjoint_falls_back_to_autodiff_on_an_untested_jax(monkeypatch):
     """The one private JAX hook (a ``linear_call`` batching rule) is installed only for the
-    tested JAX versions; on any other, ``custom_adjoint`` returns the plain function."""
+    tested JAX versions; on any other, ``custom_adjoint`` returns the plain function and
+    says so once (the slow path is never silent)."""
     from sphjax import _linear_call
 
     def fun(x):
@@ -431,8 +432,12 @@ def test_custom_adjoint_falls_back_to_autodiff_on_an_untested_jax(monkeypatch):
     monkeypatch.setattr(_linear_call, "TESTED_JAX", ())
     _linear_call.hook_installed.cache_clear()
     try:
-        plain = _linear_call.custom_adjoint(fun, adjoint, n_linear=1)
-        assert plain is fun
+        # not silently: one warning naming the version and the cost
+        with pytest.warns(UserWarning, match=rf"JAX {jax.__version__}.*falls back") as caught:
+            plain = _linear_call.custom_adjoint(fun, adjoint, n_linear=1)
+            again = _linear_call.custom_adjoint(fun, adjoint, n_linear=1)
+        assert len([w for w in caught if "falls back" in str(w.message)]) == 1
+        assert plain is fun and again is fun
         assert float(jax.grad(plain)(0.3)) == pytest.approx(np.cos(0.3))
     finally:
         _linear_call.hook_installed.cache_clear()

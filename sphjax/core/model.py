@@ -64,8 +64,9 @@ class Model:
         over each particle's own neighbours, no scatters; :mod:`sphjax.physics.pairs`):
         gradients ~1.5x faster than autodiff's transpose.  It gives first derivatives only;
         set ``False`` for second derivatives (``jax.hessian``) through a simulation.
-      pair_block: particles per block of the pair sums' adjoint passes (``None``: all at
-        once); blocks keep each block's per-pair arrays in cache.
+      pair_block: most particles per block of the pair sums' adjoint passes (``None``:
+        all at once); blocks keep each block's per-pair arrays in cache, and are made
+        equal (2,640 particles: two blocks of 1,320).
     """
 
     dim: int

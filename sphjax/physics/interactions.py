@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import functools
 
+import jax
 import jax.numpy as jnp
 
 from sphjax.core.space import displacement_fn
@@ -52,6 +53,8 @@ def _hydrodynamic_summand(pair, a, b, shared, *, h, artificial, morris, stress, 
     per unit neighbour mass (``pair_sum`` multiplies by the weight ``m_b``).  Every term
     is antisymmetric under ``a <-> b``.
 
+    The particles' fields include the per-particle ``P = p / rho^2`` and ``i = 1 / rho``
+    (:func:`momentum_fields`), so that the pair arithmetic has no divisions by density.
     ``viscous``: whether the pair takes part in the viscous terms (no-slip walls and
     fluid neighbours do, free-slip walls do not); ``b["vv"]`` is the velocity they see.
     """
@@ -62,19 +65,17 @@ def _hydrodynamic_summand(pair, a, b, shared, *, h, artificial, morris, stress, 
     v_ab = a["v"] - b["vv"]
     if artificial and viscous:
         pi_ab = monaghan_pi(pair, v_ab, a["rho"], b["rho"], c0, h, alpha, beta)
-    acceleration = pressure_acceleration(pair, unit, a["p"], a["rho"], b["p"], b["rho"], pi_ab)
+    acceleration = pressure_acceleration(pair, unit, a["P"], b["P"], pi_ab)
     if morris and viscous:
-        acceleration = acceleration + morris_acceleration(
-            pair, v_ab, unit, a["rho"], b["rho"], nu, h
-        )
+        acceleration = acceleration + morris_acceleration(pair, v_ab, unit, a["i"], b["i"], nu, h)
     if stress:
         acceleration = acceleration + transport_stress_acceleration(
-            pair, unit, a["rho"], b["rho"], a["v"], b["v"], a["dv"], b["dv"]
+            pair, unit, a["i"], b["i"], a["v"], b["v"], a["dv"], b["dv"]
         )
     out["a"] = acceleration
     if shift:
         out["shift"] = pressure_acceleration(
-            pair, unit, p_transport, a["rho"], p_transport, b["rho"]
+            pair, unit, p_transport * a["i"] ** 2, p_transport * b["i"] ** 2
         )
     return out
 
@@ -94,16 +95,14 @@ def _hydrodynamic_pullback(
     pi_ab = 0.0
     if artificial and viscous:
         pi_ab = monaghan_pi(pair, v_ab, a["rho"], b["rho"], c0, h, alpha, beta)
-    pressure = pressure_acceleration_pullback(
-        pair, unit, a["p"], a["rho"], b["p"], b["rho"], pi_ab, bar["a"]
-    )
+    pressure = pressure_acceleration_pullback(pair, unit, a["P"], b["P"], pi_ab, bar["a"])
     cot.pair(grad_w=pressure["grad_w"])
-    cot.a(p=pressure["pressure_a"], rho=pressure["density_a"])
-    cot.b(p=pressure["pressure_b"], rho=pressure["density_b"])
+    cot.a(P=pressure["coefficient"])
+    cot.b(P=pressure["coefficient"])
     v_ab_bar = 0.0
     if artificial and viscous:
         pi = monaghan_pi_pullback(
-            pair, v_ab, a["rho"], b["rho"], c0, h, alpha, beta, pressure["pi_ab"]
+            pair, v_ab, a["rho"], b["rho"], c0, h, alpha, beta, pressure["coefficient"]
         )
         cot.pair(dr=pi["dr"], r=pi["r"])
         cot.a(rho=pi["density_a"])
@@ -114,31 +113,32 @@ def _hydrodynamic_pullback(
         v_ab_bar = v_ab_bar + pi["v_ab"]
     if morris and viscous:
         viscous_bar = morris_acceleration_pullback(
-            pair, v_ab, unit, a["rho"], b["rho"], nu, h, bar["a"]
+            pair, v_ab, unit, a["i"], b["i"], nu, h, bar["a"]
         )
         cot.pair(dr=viscous_bar["dr"], r=viscous_bar["r"], grad_w=viscous_bar["grad_w"])
-        cot.a(rho=viscous_bar["density_a"])
-        cot.b(rho=viscous_bar["density_b"])
+        cot.a(i=viscous_bar["inverse_density"])
+        cot.b(i=viscous_bar["inverse_density"])
         cot.shared(3, viscous_bar["nu"])
         v_ab_bar = v_ab_bar + viscous_bar["v_ab"]
     if stress:
         flux = transport_stress_acceleration_pullback(
-            pair, unit, a["rho"], b["rho"], a["v"], b["v"], a["dv"], b["dv"], bar["a"]
+            pair, unit, a["i"], b["i"], a["v"], b["v"], a["dv"], b["dv"], bar["a"]
         )
         cot.pair(grad_w=flux["grad_w"])
-        cot.a(rho=flux["density_a"], v=flux["v_a"], dv=flux["dv_a"])
-        cot.b(rho=flux["density_b"], v=flux["v_b"], dv=flux["dv_b"])
+        cot.a(i=flux["inverse_density_a"], v=flux["v_a"], dv=flux["dv_a"])
+        cot.b(i=flux["inverse_density_b"], v=flux["v_b"], dv=flux["dv_b"])
     if (artificial or morris) and viscous:
         cot.a(v=v_ab_bar)
         cot.b(vv=-v_ab_bar)
     if shift:
         background = pressure_acceleration_pullback(
-            pair, unit, p_transport, a["rho"], p_transport, b["rho"], 0.0, bar["shift"]
+            pair, unit, p_transport * a["i"] ** 2, p_transport * b["i"] ** 2, 0.0, bar["shift"]
         )
+        coefficient_bar = background["coefficient"]
         cot.pair(grad_w=background["grad_w"])
-        cot.a(rho=background["density_a"])
-        cot.b(rho=background["density_b"])
-        cot.shared(4, background["pressure_a"] + background["pressure_b"])
+        cot.a(i=2.0 * p_transport * a["i"] * coefficient_bar)
+        cot.b(i=2.0 * p_transport * b["i"] * coefficient_bar)
+        cot.shared(4, (a["i"] ** 2 + b["i"] ** 2) * coefficient_bar)
     return cot.result(len(shared))
 
 
@@ -160,12 +160,19 @@ def _fluid_shared(system: FluidSystem, ctx):
     )
 
 
+def momentum_fields(fields: dict) -> dict:
+    """``fields`` (with ``p`` and ``rho``) and the per-particle quantities the momentum
+    summand reads instead of dividing per pair: ``P = p / rho^2`` and ``i = 1 / rho``."""
+    inverse_density = 1.0 / fields["rho"]
+    return {**fields, "P": fields["p"] * inverse_density**2, "i": inverse_density}
+
+
 def _fluid_rows(fluid, stress):
     rows = {k: fluid[k] for k in ("x", "v", "m", "rho", "p")}
     rows["vv"] = fluid["v"]
     if stress:
         rows["dv"] = fluid["dv"]
-    return rows
+    return momentum_fields(rows)
 
 
 def fluid_fluid(system: FluidSystem, fluid, _other, _fluid, pairs, ctx):
@@ -185,7 +192,7 @@ def fluid_wall(system: FluidSystem, fluid, wall_system: WallSystem, wall, pairs,
         system, ctx.geometry.smoothing_length, wall_system.boundary.no_slip
     )
     cols = {"x": wall["x"], "m": wall["m"], "rho": wall["rho"], "p": wall["p"]}
-    cols["vv"] = wall["v_viscous"]
+    cols = momentum_fields({**cols, "vv": wall["v_viscous"]})
     rows = _fluid_rows(fluid, False)
     return ctx.pair_sum(summand, rows, cols, pairs, _fluid_shared(system, ctx), weight="m")
 
@@ -202,6 +209,53 @@ def _solid_summand(pair, a, b, shared, *, domain, penalty):
         force = penalty_force(pair, dx, a["F"], b["F"], unit, unit, young_modulus, alpha)
         acceleration = acceleration + force / rho0
     return {"a": acceleration}
+
+
+def _solid_pullback(pair, a, b, shared, bar, *, domain, penalty):
+    """Reverse mode of :func:`_solid_summand` for the cotangent ``bar["a"]`` of
+    ``S grad0_a W / rho0`` (``S = P_a L0_a + P_b L0_b``), by hand:
+
+        bar(grad0 W) = S^T bar / rho0,   bar(P_a L0_a) = bar(P_b L0_b) = bar grad0 W^T / rho0,
+        bar(rho0) = -bar . (S grad0 W) / rho0^2;
+
+    the penalty force's, when present, is autodiff's (``jax.vjp`` of
+    :func:`~sphjax.physics.solid.penalty.penalty_force`)."""
+    rho0, young_modulus, alpha = shared
+    acceleration_bar = bar["a"]
+    stress = a["PL0"] + b["PL0"]
+    elastic = _matvec(stress, pair.grad_w)
+    stress_bar = acceleration_bar[..., :, None] * pair.grad_w[..., None, :] / rho0
+    cot = pair_sums.Cotangents()
+    cot.pair(grad_w=_matvec(jnp.swapaxes(stress, -1, -2), acceleration_bar) / rho0)
+    cot.a(PL0=stress_bar)
+    cot.b(PL0=stress_bar)
+    cot.shared(0, -jnp.sum(acceleration_bar * elastic, axis=-1) / rho0**2)
+    if penalty:
+
+        def force(geometry, xc_a, xc_b, F_a, F_b, young_modulus, alpha, rho0):
+            reference = pair_sums.PairGeometry(*geometry, pair.mask)
+            dx = displacement_fn(domain)(xc_a, xc_b) * pair.mask[..., None]
+            unit = jnp.ones_like(pair.r)
+            force = penalty_force(reference, dx, F_a, F_b, unit, unit, young_modulus, alpha)
+            return force / rho0[..., None]
+
+        geometry = (pair.dr, pair.r, pair.w, pair.grad_w)
+        # per-pair copies of the parameters: their cotangents are per pair, summed later
+        per_pair = [jnp.broadcast_to(s, pair.r.shape) for s in (young_modulus, alpha, rho0)]
+        _, pull = jax.vjp(force, geometry, a["xc"], b["xc"], a["F"], b["F"], *per_pair)
+        (dr, r, w, grad_w), xc_a, xc_b, F_a, F_b, e_bar, alpha_bar, rho0_bar = pull(
+            acceleration_bar
+        )
+        cot.pair(dr=dr, r=r, w=w, grad_w=grad_w)
+        cot.a(xc=xc_a, F=F_a)
+        cot.b(xc=xc_b, F=F_b)
+        cot.shared(0, rho0_bar)
+        cot.shared(1, e_bar)
+        cot.shared(2, alpha_bar)
+    return cot.result(len(shared))
+
+
+pair_sums.define_pullback(_solid_summand, _solid_pullback)
 
 
 def _matvec(matrix, vector):
@@ -251,7 +305,7 @@ def fluid_solid(system: FluidSystem, fluid, solid_system: SolidSystem, solid, pa
     for a no-slip :class:`~sphjax.SolidBoundary`)."""
     h = ctx.geometry.smoothing_length
     summand = _fluid_on_boundary(system, h, solid_system.boundary.no_slip)
-    cols = fsi.solid_as_boundary_columns(solid)
+    cols = momentum_fields(fsi.solid_as_boundary_columns(solid))
     rows = _fluid_rows(fluid, False)
     return ctx.pair_sum(summand, rows, cols, pairs, _fluid_shared(system, ctx), weight="m")
 
@@ -263,7 +317,7 @@ def solid_fluid(solid_system: SolidSystem, solid, system: FluidSystem, fluid, pa
     fluid_term = _fluid_on_boundary(system, h, solid_system.boundary.no_slip)
     fluid_term = functools.partial(fluid_term, shift=False)
     summand = functools.partial(fsi.reaction_summand, fluid_term=fluid_term)
-    rows = {**fsi.solid_as_boundary_columns(solid), "m_solid": solid["m"]}
+    rows = momentum_fields({**fsi.solid_as_boundary_columns(solid), "m_solid": solid["m"]})
     cols = _fluid_rows(fluid, False)
     return ctx.pair_sum(summand, rows, cols, pairs, _fluid_shared(system, ctx), weight="m")
 

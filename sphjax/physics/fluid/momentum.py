@@ -7,77 +7,79 @@ import dataclasses
 from sphjax.core.space import dot, scale
 
 
-def pressure_acceleration(pair, mass_b, pressure_a, density_a, pressure_b, density_b, pi_ab=0.0):
+def pressure_coefficient(pressure, density):
+    """``P = p / rho^2``, per particle: the pressure term of eq. 10 is a sum of two."""
+    return pressure / density**2
+
+
+def pressure_acceleration(pair, mass_b, coefficient_a, coefficient_b, pi_ab=0.0):
     """Eq. 10 without gravity and laminar viscosity, per pair:
 
-    ``- m_b (p_a / rho_a^2 + p_b / rho_b^2 + Pi_ab) grad_a W_ab``.
+    ``- m_b (p_a / rho_a^2 + p_b / rho_b^2 + Pi_ab) grad_a W_ab``, with the per-particle
+    coefficients ``P = p / rho^2`` (:func:`pressure_coefficient`) as arguments, so that
+    no pair divides.
     """
-    term = pressure_a / density_a**2 + pressure_b / density_b**2 + pi_ab
+    term = coefficient_a + coefficient_b + pi_ab
     return scale(-(mass_b * term), pair.grad_w)
 
 
-def pressure_acceleration_pullback(
-    pair, mass_b, pressure_a, density_a, pressure_b, density_b, pi_ab, bar
-):
+def pressure_acceleration_pullback(pair, mass_b, coefficient_a, coefficient_b, pi_ab, bar):
     """Reverse mode of :func:`pressure_acceleration` for the cotangent ``bar`` of its
-    output ``-m_b T grad_a W``, ``T = p_a / rho_a^2 + p_b / rho_b^2 + Pi_ab``:
+    output ``-m_b T grad_a W``, ``T = P_a + P_b + Pi_ab``:
 
         bar(grad_a W) = -m_b T bar,     bar(T) = -m_b (bar . grad_a W),
-        bar(m_b) = -T (bar . grad_a W),  bar(p_a) = bar(T) / rho_a^2,
-        bar(rho_a) = -2 p_a bar(T) / rho_a^3   (``b`` likewise),   bar(Pi_ab) = bar(T).
+        bar(m_b) = -T (bar . grad_a W),  bar(P_a) = bar(P_b) = bar(Pi_ab) = bar(T).
 
     Returns a dict of cotangents keyed by the arguments' names.
     """
-    term = pressure_a / density_a**2 + pressure_b / density_b**2 + pi_ab
+    term = coefficient_a + coefficient_b + pi_ab
     along = dot(bar, pair.grad_w)
     term_bar = -mass_b * along
     return {
         "grad_w": scale(-(mass_b * term), bar),
         "mass_b": -term * along,
-        "pressure_a": term_bar / density_a**2,
-        "density_a": -2.0 * pressure_a * term_bar / density_a**3,
-        "pressure_b": term_bar / density_b**2,
-        "density_b": -2.0 * pressure_b * term_bar / density_b**3,
-        "pi_ab": term_bar,
+        "coefficient": term_bar,
     }
 
 
-def transport_stress_acceleration(pair, mass_b, density_a, density_b, v_a, v_b, dv_a, dv_b):
+def transport_stress_acceleration(
+    pair, mass_b, inverse_density_a, inverse_density_b, v_a, v_b, dv_a, dv_b
+):
     """Transport-velocity momentum flux (Adami, Hu & Adams 2013), in the form of eq. 10:
 
     ``m_b (A_a / rho_a^2 + A_b / rho_b^2) . grad_a W_ab`` with ``A = rho v (v~ - v)^T``,
-    i.e. ``A / rho^2 . grad W = v ((v~ - v) . grad W) / rho``.
+    i.e. ``A / rho^2 . grad W = v ((v~ - v) . grad W) / rho``; the reciprocal densities
+    ``1 / rho`` are per-particle arguments.
     """
-    flux_a = scale(dot(dv_a, pair.grad_w), v_a)
-    flux_b = scale(dot(dv_b, pair.grad_w), v_b)
-    term = scale(1.0 / density_a, flux_a) + scale(1.0 / density_b, flux_b)
-    return scale(mass_b, term)
+    flux_a = scale(dot(dv_a, pair.grad_w) * inverse_density_a, v_a)
+    flux_b = scale(dot(dv_b, pair.grad_w) * inverse_density_b, v_b)
+    return scale(mass_b, flux_a + flux_b)
 
 
 def transport_stress_acceleration_pullback(
-    pair, mass_b, density_a, density_b, v_a, v_b, dv_a, dv_b, bar
+    pair, mass_b, inverse_density_a, inverse_density_b, v_a, v_b, dv_a, dv_b, bar
 ):
     """Reverse mode of :func:`transport_stress_acceleration` for the cotangent ``bar`` of
-    ``m_b (v_a g_a / rho_a + v_b g_b / rho_b)``, ``g = (v~ - v) . grad_a W``:
+    ``m_b (v_a g_a i_a + v_b g_b i_b)``, ``g = (v~ - v) . grad_a W``, ``i = 1 / rho``:
 
-        bar(v_a) = m_b g_a bar / rho_a,   bar(g_a) = m_b (bar . v_a) / rho_a,
-        bar(rho_a) = -m_b (bar . v_a) g_a / rho_a^2,   bar(dv_a) = bar(g_a) grad_a W,
-        bar(grad_a W) = bar(g_a) dv_a + bar(g_b) dv_b,   bar(m_b) = bar . (v_a g_a / rho_a
-        + v_b g_b / rho_b)   (``b`` likewise).
+        bar(v_a) = m_b g_a i_a bar,   bar(g_a) = m_b (bar . v_a) i_a,
+        bar(i_a) = m_b (bar . v_a) g_a,   bar(dv_a) = bar(g_a) grad_a W,
+        bar(grad_a W) = bar(g_a) dv_a + bar(g_b) dv_b,   bar(m_b) = bar . (v_a g_a i_a
+        + v_b g_b i_b)   (``b`` likewise).
     """
     g_a = dot(dv_a, pair.grad_w)
     g_b = dot(dv_b, pair.grad_w)
     along_a = dot(bar, v_a)
     along_b = dot(bar, v_b)
-    g_a_bar = mass_b * along_a / density_a
-    g_b_bar = mass_b * along_b / density_b
+    g_a_bar = mass_b * along_a * inverse_density_a
+    g_b_bar = mass_b * along_b * inverse_density_b
     return {
         "grad_w": scale(g_a_bar, dv_a) + scale(g_b_bar, dv_b),
-        "mass_b": along_a * g_a / density_a + along_b * g_b / density_b,
-        "density_a": -g_a_bar * g_a / density_a,
-        "density_b": -g_b_bar * g_b / density_b,
-        "v_a": scale(mass_b * g_a / density_a, bar),
-        "v_b": scale(mass_b * g_b / density_b, bar),
+        "mass_b": along_a * g_a * inverse_density_a + along_b * g_b * inverse_density_b,
+        "inverse_density_a": mass_b * along_a * g_a,
+        "inverse_density_b": mass_b * along_b * g_b,
+        "v_a": scale(mass_b * g_a * inverse_density_a, bar),
+        "v_b": scale(mass_b * g_b * inverse_density_b, bar),
         "dv_a": scale(g_a_bar, pair.grad_w),
         "dv_b": scale(g_b_bar, pair.grad_w),
     }

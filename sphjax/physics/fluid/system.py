@@ -24,7 +24,9 @@ import functools
 import jax.numpy as jnp
 
 from sphjax.core import kernels
+from sphjax.core.space import scale
 from sphjax.core.state import Kind
+from sphjax.physics import pairs as pair_sums
 from sphjax.physics.fluid.density import (
     ContinuityDensity,
     SummationDensity,
@@ -120,9 +122,33 @@ def _kernel_summand(pair, a, b, shared):
     return summation_term(pair, 1.0)
 
 
+def _kernel_pullback(pair, a, b, shared, bar):
+    """Reverse mode of :func:`_kernel_summand`: ``W_ab`` gets the cotangent itself."""
+    cot = pair_sums.Cotangents()
+    cot.pair(w=bar)
+    return cot.result(len(shared))
+
+
+pair_sums.define_pullback(_kernel_summand, _kernel_pullback)
+
+
 def _velocity_divergence_summand(pair, a, b, shared):
     """``(v_a - v_b) . grad_a W_ab``; times the weight ``m_b`` it is eq. 11's pair term."""
     return continuity_term(pair, 1.0, a["v"], b["v"])
+
+
+def _velocity_divergence_pullback(pair, a, b, shared, bar):
+    """Reverse mode of :func:`_velocity_divergence_summand`: with ``s = v_ab . grad W``,
+    ``grad W`` gets ``bar v_ab``, ``v_a`` gets ``bar grad W`` and ``v_b`` its negative."""
+    cot = pair_sums.Cotangents()
+    flux = scale(bar, pair.grad_w)
+    cot.pair(grad_w=scale(bar, a["v"] - b["v"]))
+    cot.a(v=flux)
+    cot.b(v=-flux)
+    return cot.result(len(shared))
+
+
+pair_sums.define_pullback(_velocity_divergence_summand, _velocity_divergence_pullback)
 
 
 def _continuity_with_diffusion(pair, a, b, shared, *, h):

@@ -60,42 +60,44 @@ def monaghan_pi_pullback(pair, v_ab, density_a, density_b, sound_speed, h, alpha
     }
 
 
-def morris_acceleration(pair, v_ab, mass_b, density_a, density_b, nu, h):
+def morris_acceleration(pair, v_ab, mass_b, inverse_density_a, inverse_density_b, nu, h):
     """Morris et al. (1997) laminar viscosity per pair:
 
     ``m_b (mu_a + mu_b) / (rho_a rho_b) (r_ab . grad_a W_ab) / (r_ab^2 + 0.01 h^2) v_ab``
-    with ``mu = rho nu``.
+    with ``mu = rho nu``, i.e. ``m_b nu (1 / rho_a + 1 / rho_b) ...``; the reciprocal
+    densities are per-particle arguments.
     """
-    coefficient = mass_b * nu * (density_a + density_b) / (density_a * density_b)
+    coefficient = mass_b * nu * (inverse_density_a + inverse_density_b)
     factor = coefficient * dot(pair.dr, pair.grad_w) / (pair.r**2 + ETA2 * h**2)
     return scale(factor, v_ab)
 
 
-def morris_acceleration_pullback(pair, v_ab, mass_b, density_a, density_b, nu, h, bar):
+def morris_acceleration_pullback(
+    pair, v_ab, mass_b, inverse_density_a, inverse_density_b, nu, h, bar
+):
     """Reverse mode of :func:`morris_acceleration` for the cotangent ``bar`` of
     ``C (r_ab . grad_a W) / D v_ab``, ``C = m_b nu (1 / rho_a + 1 / rho_b)``,
     ``D = r^2 + 0.01 h^2``:
 
         bar(v_ab) = C q / D bar,   bar(q) = C (bar . v_ab) / D,   bar(r_ab) = bar(q) grad_a W,
         bar(grad_a W) = bar(q) r_ab,   bar(r) = -2 r C q (bar . v_ab) / D^2,
-        bar(C) = q (bar . v_ab) / D   (then m_b, nu, rho_a, rho_b through ``C``).
+        bar(C) = q (bar . v_ab) / D   (then m_b, nu and the reciprocal densities through C).
     """
-    inverse_densities = 1.0 / density_a + 1.0 / density_b
+    inverse_densities = inverse_density_a + inverse_density_b
     coefficient = mass_b * nu * inverse_densities
     q = dot(pair.dr, pair.grad_w)
-    denominator = pair.r**2 + ETA2 * h**2
+    inverse_denominator = 1.0 / (pair.r**2 + ETA2 * h**2)
     along = dot(bar, v_ab)
-    coefficient_bar = q * along / denominator
-    q_bar = coefficient * along / denominator
+    coefficient_bar = q * along * inverse_denominator
+    q_bar = coefficient * along * inverse_denominator
     return {
-        "v_ab": scale(coefficient * q / denominator, bar),
+        "v_ab": scale(coefficient * q * inverse_denominator, bar),
         "dr": scale(q_bar, pair.grad_w),
         "grad_w": scale(q_bar, pair.dr),
-        "r": -2.0 * pair.r * q_bar * q / denominator,
+        "r": -2.0 * pair.r * q_bar * q * inverse_denominator,
         "mass_b": coefficient_bar * nu * inverse_densities,
         "nu": coefficient_bar * mass_b * inverse_densities,
-        "density_a": -coefficient_bar * mass_b * nu / density_a**2,
-        "density_b": -coefficient_bar * mass_b * nu / density_b**2,
+        "inverse_density": coefficient_bar * mass_b * nu,
     }
 
 

@@ -34,6 +34,7 @@ import jax.numpy as jnp
 
 from sphjax.core.space import displacement_fn
 from sphjax.core.state import Kind
+from sphjax.physics import pairs as pair_sums
 from sphjax.physics.solid.boundary import SolidBoundary
 from sphjax.physics.solid.correction import (
     corrected_kernel_gradient,
@@ -105,9 +106,34 @@ def _moment_summand(pair, a, b, shared):
 
 
 def _deformation_summand(pair, a, b, shared, *, domain):
+    """Eq. 16's pair term ``-V0_b x_ab (L0_a grad0_a W)^T`` (the pair sum is ``F_a``)."""
     dx = displacement_fn(domain)(a["xc"], b["xc"])
     dx = dx * pair.mask[..., None]
     return deformation_term(dx, corrected_kernel_gradient(a["L0"], pair.grad_w), b["V"])
+
+
+def _deformation_pullback(pair, a, b, shared, bar, *, domain):
+    """Reverse mode of :func:`_deformation_summand` for the per-pair cotangent ``bar`` of
+    ``T_ij = -V_b dx_i g_j``, ``g = L0_a grad0_a W``, ``dx = x_a - x_b`` (minimum image):
+
+        bar(dx)_i = -V_b bar_ij g_j,   bar(g)_j = -V_b bar_ij dx_i,
+        bar(V_b) = -bar_ij dx_i g_j,   bar(L0_a)_jk = bar(g)_j grad0_k W,
+        bar(grad0 W)_k = L0_a,jk bar(g)_j,   bar(x_a) = bar(dx) = -bar(x_b).
+    """
+    mask = pair.mask[..., None]
+    dx = displacement_fn(domain)(a["xc"], b["xc"]) * mask
+    g = corrected_kernel_gradient(a["L0"], pair.grad_w)
+    volume = b["V"][..., None]
+    dx_bar = -volume * jnp.einsum("...ij,...j->...i", bar, g)
+    g_bar = -volume * jnp.einsum("...ij,...i->...j", bar, dx)
+    cot = pair_sums.Cotangents()
+    cot.pair(grad_w=jnp.einsum("...jk,...j->...k", a["L0"], g_bar))
+    cot.a(xc=dx_bar * mask, L0=g_bar[..., :, None] * pair.grad_w[..., None, :])
+    cot.b(xc=-dx_bar * mask, V=-jnp.einsum("...ij,...i,...j->...", bar, dx, g))
+    return cot.result(len(shared))
+
+
+pair_sums.define_pullback(_deformation_summand, _deformation_pullback)
 
 
 def solid_reference(solid: dict, pairs, ctx) -> dict:
