@@ -103,7 +103,13 @@ def morris_acceleration_pullback(pair, v_ab, mass_b, density_a, density_b, nu, h
 class ArtificialViscosity:
     """Monaghan's artificial viscosity ``Pi_ab`` in eq. 10."""
 
+    #: the Params fields ``Pi_ab`` reads
+    parameters = ("artificial_alpha", "artificial_beta", "sound_speed")
+
 
 @dataclasses.dataclass(frozen=True)
 class MorrisViscosity:
     """Morris et al. (1997) laminar viscosity with ``Params.kinematic_viscosity``."""
+
+    #: the Params field the laminar term reads
+    parameters = ("kinematic_viscosity",)
