@@ -145,6 +145,18 @@ def test_a_new_model_decides_what_is_used():
     assert sphjax.make_params(2).replace(kinematic_viscosity=1.0).unused == ()
 
 
+def test_a_group_no_system_reads_is_refused():
+    """Params with a solid group on a model without a solid: the solid's fields are
+    refused, naming the system that would read them."""
+    case = cases.taylor_green(n=4)
+    both = sphjax.make_params(2, kinematic_viscosity=0.01, young_modulus=1e6)
+    case = case.replace(params=both)
+    with pytest.raises(UnusedParameterError, match=r"^young_modulus is not used by this model "
+                       r"\(it has no solid\): add a SolidSystem\(\) to use it$"):  # fmt: skip
+        case.params.replace(young_modulus=2e6)
+    assert float(case.params.replace(kinematic_viscosity=0.02).kinematic_viscosity) == 0.02
+
+
 def _perturbed_state(case):
     """A state at which every term of the right-hand side is active: uneven masses, a
     velocity field with approaching pairs, densities off the rest density, and a

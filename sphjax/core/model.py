@@ -16,7 +16,7 @@ from __future__ import annotations
 import dataclasses
 
 from sphjax.core.kernels import Kernel, QuinticSpline
-from sphjax.core.params import fields
+from sphjax.core.params import GROUPS, fields, refusal
 
 
 @dataclasses.dataclass(frozen=True)
@@ -145,6 +145,13 @@ class Model:
             for name, why in getattr(system, "unused_parameters", dict)().items():
                 if name not in read:
                     unused.setdefault(name, why)
+        system_of = {"fluid": "FluidSystem", "solid": "SolidSystem"}
+        for group, defaults in GROUPS.items():  # a group no system of the model reads
+            for name in defaults:
+                if name not in read and name not in unused:
+                    unused[name] = refusal(
+                        name, "model", f"it has no {group}", f"add a {system_of[group]}()"
+                    )
         return tuple(sorted(unused.items(), key=lambda item: fields().index(item[0])))
 
     def replace(self, **changes) -> Model:

@@ -176,7 +176,8 @@ class Params:
     def for_model(self, model) -> Params:
         """These Params as ``model`` reads them: the fields none of its systems read become
         :attr:`unused`, which :meth:`replace` refuses (see ``Model.unused_parameters``)."""
-        unused = model.unused_parameters()
+        present = {name for name, _ in self.items()}
+        unused = tuple(item for item in model.unused_parameters() if item[0] in present)
         return self if unused == self.unused else dataclasses.replace(self, unused=unused)
 
     def check_used(self, name: str) -> None:
