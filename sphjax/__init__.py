@@ -30,6 +30,7 @@ _NAMES = {
     "FluidParams": "sphjax.core.params",
     "Params": "sphjax.core.params",
     "SolidParams": "sphjax.core.params",
+    "UnusedParameterError": "sphjax.core.params",
     "make_params": "sphjax.core.params",
     "Kind": "sphjax.core.state",
     "State": "sphjax.core.state",
@@ -135,5 +136,6 @@ __all__ = [
     "Trajectory",
     "TrajectoryWriter",
     "TransportVelocity",
+    "UnusedParameterError",
     "WallSystem",
 ]

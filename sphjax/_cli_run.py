@@ -119,19 +119,26 @@ def build_setup_case(args):
 def apply_sets(case, sets: list[tuple[str, float | tuple]]):
     """``case`` with ``--set FIELD=VALUE`` applied to its Params.
 
-    The case's time step is shortened in proportion when the new values lower the stable
-    step (a larger sound speed or Young's modulus), so the case's Courant number is kept.
+    A field the case's model does not read is refused, naming the choice that would read
+    it (:class:`~sphjax.UnusedParameterError`).  The case's time step is shortened in
+    proportion when the new values lower the stable step (a larger sound speed or Young's
+    modulus), so the case's Courant number is kept.
     """
     if not sets:
         return case
     changes = {}
     fields = [name for name, _ in case.params.items()]
+    used = [name for name, _ in case.params.items(used_only=True)]
     for name, value in sets:
         if name not in fields:
             raise UsageError(
                 "--set",
-                f"{name!r} is not a parameter of this case; choose one of {', '.join(fields)}",
+                f"{name!r} is not a parameter of this case; choose one of {', '.join(used)}",
             )
+        try:
+            case.params.check_used(name)
+        except ValueError as err:
+            raise UsageError("--set", str(err)) from None
         old = np.asarray(getattr(case.params, name))
         new = np.asarray(value, dtype=float)
         if new.shape != old.shape:

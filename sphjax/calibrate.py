@@ -163,9 +163,9 @@ def calibrate(
     fields = {name for name, _ in base_params.items()}
     for name in names:
         if name not in fields:
-            raise ValueError(
-                f"initial: {name!r} is not a Params field; choose from {sorted(fields)}"
-            )
+            used = sorted(name for name, _ in base_params.items(used_only=True))
+            raise ValueError(f"initial: {name!r} is not a Params field; choose from {used}")
+        base_params.check_used(name)  # a field the model does not read cannot be fitted
     if isinstance(transform, str):
         transform = dict.fromkeys(names, transform)
     pairs = {}

@@ -226,7 +226,8 @@ def _add_run(sub) -> None:
         action="append",
         default=[],
         metavar="FIELD=VALUE",
-        help="set a physical parameter (a Params field), e.g. --set kinematic_viscosity=0.02 "
+        help="set a physical parameter (a Params field the case's model reads, listed by "
+        "'sphjax cases CASE'), e.g. --set kinematic_viscosity=0.02 "
         "or --set gravity=0,-9.81; repeatable",
     )
     run.add_argument(
@@ -472,8 +473,8 @@ def cmd_cases(args) -> int:
     print("case arguments (--case-arg KEY=VALUE):")
     for key, parameter in inspect.signature(factory).parameters.items():
         print(f"  {key} = {parameter.default!r}")
-    print("parameters (--set FIELD=VALUE), as the case sets them:")
-    for name, value in case.params.items():
+    print("parameters (--set FIELD=VALUE), as the case sets them (those its model reads):")
+    for name, value in case.params.items(used_only=True):
         value = np.asarray(value)
         shown = ",".join(f"{v:g}" for v in value.ravel()) if value.ndim else f"{float(value):g}"
         print(f"  {name} = {shown}")

@@ -157,6 +157,8 @@ class TrajectoryWriter:
             group = self._file.create_group("params")
             for name, value in params.items():
                 group.attrs[name] = np.asarray(value)
+            if params.unused:  # the refused fields, so that the Params read back refuse them
+                group.attrs[_UNUSED] = json.dumps([list(item) for item in params.unused])
         for key, value in (attrs or {}).items():
             a[key] = json.dumps(_jsonable(value))
         self._flush()
@@ -295,6 +297,7 @@ def _open(path):
 
 
 _PLAIN_ATTRS = {"format", "sphjax_version", "case", "error"}
+_UNUSED = "unused"  # attribute of the params group: Params.unused as JSON [[field, refusal]]
 
 
 def _metadata(f) -> dict[str, Any]:
@@ -305,9 +308,12 @@ def _metadata(f) -> dict[str, Any]:
     meta["complete"] = bool(meta.get("complete", False))
     meta["n_frames"] = int(f["times"].shape[0]) if "times" in f else 0
     if "params" in f:
-        values = {name: np.asarray(value) for name, value in f["params"].attrs.items()}
+        attrs = dict(f["params"].attrs.items())
+        unused = tuple(tuple(item) for item in json.loads(_decode(attrs.pop(_UNUSED, "[]"))))
+        values = {name: np.asarray(value) for name, value in attrs.items()}
         gravity = values.pop("gravity")
-        meta["params"] = make_params(gravity.shape[0], gravity=gravity, **values)
+        params = make_params(gravity.shape[0], gravity=gravity, **values)
+        meta["params"] = dataclasses.replace(params, unused=unused)
     return meta
 
 

@@ -68,6 +68,15 @@ def test_calibrate_rejects_bad_input():
         )
 
 
+def test_calibrate_refuses_a_field_the_model_does_not_read():
+    """Fitting a field no equation of the case reads would give a zero gradient forever:
+    refused up front, naming the choice that would read it."""
+    dam = sphjax.cases.dam_break(n=4)
+    with pytest.raises(sphjax.UnusedParameterError, match=r"^kinematic_viscosity is not used"):
+        calibrate(_decay_model, jnp.zeros(20), dam.params, {"kinematic_viscosity": 0.1},
+                  optax.adam(0.1), 1)  # fmt: skip
+
+
 def test_calibrate_rejects_unknown_mode():
     base = make_params(2)
     with pytest.raises(ValueError, match="mode must be one of"):

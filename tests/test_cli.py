@@ -51,6 +51,21 @@ def test_cases_describes_one_case(capsys):
     out = capsys.readouterr().out
     assert "column_width = 0.3" in out and "wall_slip = 'no_slip'" in out  # --case-arg
     assert "gravity = 0,-9.81" in out and "reference_density = 1000" in out  # --set
+    # only the parameters the dam break's model reads (no Morris viscosity, no transport
+    # velocity): the others would be refused
+    assert "artificial_alpha = " in out and "density_diffusion = " in out
+    assert "kinematic_viscosity" not in out and "transport_pressure" not in out
+
+
+@pytest.mark.parametrize("name", ["taylor_green", "oscillating_plate", "hydrostatic_fsi_plate"])
+def test_cases_lists_the_parameters_the_model_reads(name, capsys):
+    assert main(["cases", name]) == 0
+    out = capsys.readouterr().out
+    listed = out.split("parameters (--set FIELD=VALUE)")[1].splitlines()[1:]
+    case = sphjax.cases.CASES[name](n=2 if name != "taylor_green" else 4)
+    used = [field for field, _ in case.params.items(used_only=True)]
+    assert [line.split(" = ")[0].strip() for line in listed] == used
+    assert not {field for field, _ in case.params.unused} & set(used)
 
 
 def test_run_writes_frames_and_prints_a_summary(tiny_run, capsys):
@@ -196,6 +211,37 @@ BAD_INPUT = [
     ([*RUN, "--set", "sound_speed=inf"], "sound_speed=inf: the value must be finite", None),
     ([*RUN, "--set", "gravity=1"], "--set: gravity takes 2 comma-separated numbers", None),
     ([*RUN, "--set", "sound_speed=1,2"], "--set: sound_speed takes a number", None),
+    (
+        ["run", "dam_break", "--n", "4", "--set", "kinematic_viscosity=0.5", "--quiet"],
+        "sphjax run: error: --set: kinematic_viscosity is not used by this fluid (artificial "
+        "viscosity only): add MorrisViscosity() to the fluid's viscosity to use it",
+        None,
+    ),
+    (
+        [*RUN, "--set", "artificial_alpha=0.1"],
+        "--set: artificial_alpha is not used by this fluid (Morris viscosity only): add "
+        "ArtificialViscosity() to the fluid's viscosity to use it",
+        None,
+    ),
+    (
+        ["run", "oscillating_plate", "--n", "2", "--set", "penalty_alpha=0.1", "--quiet"],
+        "--set: penalty_alpha is not used by this solid (no penalty force)",
+        None,
+    ),
+    (
+        [
+            "dataset",
+            "dam_break",
+            "--out",
+            "d",
+            "--steps",
+            "8",
+            "--vary",
+            "kinematic_viscosity=0.01:0.02",
+        ],
+        "--vary: kinematic_viscosity is not used by this fluid (artificial viscosity only)",
+        None,
+    ),  # fmt: skip
     (
         [*RUN, "--case-arg", "nope=1"],
         "case 'taylor_green' has no argument 'nope'; it accepts n,",

@@ -378,6 +378,13 @@ BAD_FILES = [
         "solid.poisson_ratio: must lie in (-1, 0.5), got 0.7",
     ),
     (_edit("young_modulus = 1e6\n", "", SOLID), "solid.young_modulus: missing; add it (E in Pa)"),
+    (
+        _edit(
+            "density = 1000.0",
+            'density = 1000.0\ndensity_model = "summation"\ndensity_diffusion = 0.1',
+        ),
+        "fluid.density_diffusion: applies to density_model = 'continuity' only",
+    ),  # fmt: skip
     (_edit("dx = 0.05", "dx = 0.05\ngravity 0"), "not valid TOML: Expected '=' after a key"),
     ("fluid = 3\n" + BASE.split("[fluid]")[0], "fluid: must be a table (a [fluid] section)"),
 ]
@@ -413,6 +420,40 @@ def test_bad_run_arguments_with_a_file(argv, message, tmp_path, capsys, monkeypa
     err = capsys.readouterr().err
     assert message in err, err
     assert len(err.strip().splitlines()) == 1, err
+
+
+def test_a_key_given_chooses_its_term_and_the_others_are_refused(tmp_path):
+    """Parameters act or are refused: a term's key in the file (0 included) puts the term
+    in the model, so the value set acts and ``replace`` and ``jax.grad`` reach it; a term
+    whose key is absent is not in the model, and its parameter is refused."""
+    base = from_toml(_write(tmp_path, "a.toml", BASE))
+    fluid = base.model.systems[0]
+    assert fluid.viscosity == () and fluid.density_diffusion is None
+    unused = dict(base.params.unused)
+    for field in ("artificial_alpha", "artificial_beta", "kinematic_viscosity",
+                  "density_diffusion", "transport_pressure"):  # fmt: skip
+        assert field in unused
+    with pytest.raises(sphjax.UnusedParameterError, match=r"^kinematic_viscosity is not used"):
+        base.params.replace(kinematic_viscosity=1e-3)
+    given = _edit(
+        "sound_speed = 20.0",
+        "sound_speed = 20.0\nkinematic_viscosity = 0.0\nartificial_beta = 0.0\n"
+        "density_diffusion = 0.0",
+    )
+    case = from_toml(_write(tmp_path, "b.toml", given))
+    fluid = case.model.systems[0]
+    assert fluid.physical_viscosity and fluid.artificial_viscosity
+    assert isinstance(fluid.density_diffusion, sphjax.MolteniColagrossi)
+    assert dict(case.params.unused).keys() == {"transport_pressure"}
+    assert float(case.params.replace(kinematic_viscosity=1e-3).kinematic_viscosity) == 1e-3
+    assert float(case.params.density_diffusion) == 0.0
+    # in the solid: penalty_alpha absent, no penalty force, refused; given, it acts
+    solid = from_toml(_write(tmp_path, "s.toml", SOLID))
+    with pytest.raises(sphjax.UnusedParameterError, match=r"^penalty_alpha is not used"):
+        solid.params.replace(penalty_alpha=0.1)
+    penalised = from_toml(_write(tmp_path, "p.toml", _edit("poisson_ratio = 0.3",
+                          "poisson_ratio = 0.3\npenalty_alpha = 0.0", SOLID)))  # fmt: skip
+    assert penalised.params.unused == ()
 
 
 def test_errors_name_the_key_in_python(tmp_path):

@@ -325,16 +325,22 @@ def _fluid(table, dim, folder) -> dict:
         density_model=t.get(
             "density_model", "string", "continuity", choices=("continuity", "summation")
         ),
-        artificial_viscosity=t.get("artificial_viscosity", "number", 0.0, non_negative=True),
-        artificial_beta=t.get("artificial_beta", "number", 0.0, non_negative=True),
-        kinematic_viscosity=t.get("kinematic_viscosity", "number", 0.0, non_negative=True),
-        density_diffusion=t.get("density_diffusion", "number", 0.0, non_negative=True),
+        # a term's key given (0 included) chooses the term; absent: no such term
+        artificial_viscosity=t.get("artificial_viscosity", "number", None, non_negative=True),
+        artificial_beta=t.get("artificial_beta", "number", None, non_negative=True),
+        kinematic_viscosity=t.get("kinematic_viscosity", "number", None, non_negative=True),
+        density_diffusion=t.get("density_diffusion", "number", None, non_negative=True),
         background_pressure=t.get("background_pressure", "number", 0.0),
         velocity=t.get("velocity", "vector", (0.0,) * dim, length=dim),
         hydrostatic=t.get("hydrostatic", "bool", False),
     )
     if "gamma" in t.table and f["equation_of_state"] == "linear":
         raise SetupError("fluid.gamma", "applies to the Tait equation of state only; remove it")
+    if f["density_diffusion"] is not None and f["density_model"] != "continuity":
+        raise SetupError(
+            "fluid.density_diffusion",
+            "applies to density_model = 'continuity' only; remove it or change density_model",
+        )
 
     def options(shape_table):
         return dict(velocity=shape_table.get("velocity", "vector", f["velocity"], length=dim))
@@ -570,9 +576,13 @@ def build_setup(s: dict) -> Case:
     # model and parameters
     systems, values = [], {}
     if fluid is not None:
-        viscosity = (ArtificialViscosity(),) * bool(
-            fluid["artificial_viscosity"] > 0 or fluid["artificial_beta"] > 0
-        ) + (MorrisViscosity(),) * bool(fluid["kinematic_viscosity"] > 0)
+        # every key given acts: it chooses its term, so that case.params.replace and
+        # jax.grad reach it (Params a model does not read are refused)
+        given = {key for key, value in fluid.items() if value is not None}
+        artificial = bool(given & {"artificial_viscosity", "artificial_beta"})
+        morris = "kinematic_viscosity" in given
+        viscosity = (ArtificialViscosity(),) * artificial + (MorrisViscosity(),) * morris
+        diffusion = "density_diffusion" in given
         eos = TaitEOS(gamma=fluid["gamma"]) if fluid["equation_of_state"] == "tait" else LinearEOS()
         systems.append(
             FluidSystem(
@@ -581,18 +591,18 @@ def build_setup(s: dict) -> Case:
                 if fluid["density_model"] == "continuity"
                 else SummationDensity(),
                 viscosity=viscosity,
-                density_diffusion=MolteniColagrossi() if fluid["density_diffusion"] > 0 else None,
+                density_diffusion=MolteniColagrossi() if diffusion else None,
             )
         )
         values.update(
             reference_density=fluid["density"],
             sound_speed=fluid["sound_speed"],
-            artificial_alpha=fluid["artificial_viscosity"],
-            artificial_beta=fluid["artificial_beta"],
-            kinematic_viscosity=fluid["kinematic_viscosity"],
+            artificial_alpha=fluid["artificial_viscosity"] or 0.0,
+            artificial_beta=fluid["artificial_beta"] or 0.0,
+            kinematic_viscosity=fluid["kinematic_viscosity"] or 0.0,
             background_pressure=fluid["background_pressure"],
         )
-        if fluid["density_diffusion"] > 0:
+        if diffusion:
             values["density_diffusion"] = fluid["density_diffusion"]
     if len(x_wall):
         systems.append(WallSystem(AdamiBoundary(no_slip=s["walls"]["slip"] == "no_slip")))

@@ -19,7 +19,8 @@ class Case:
       name: case name.
       state: initial :class:`State`.
       model: static :class:`Model`.
-      params: differentiable :class:`Params`.
+      params: differentiable :class:`Params`, carrying the fields ``model`` does not read
+        as :attr:`Params.unused`: ``case.params.replace(...)`` refuses to set them.
       dt: a stable time step for ``params`` (CFL and viscous/body-force limits).
       t_end: default end time.
       info: case-specific numbers (resolution, geometry, reference values, probes), for
@@ -39,6 +40,10 @@ class Case:
     t_end: float
     info: dict[str, Any] = dataclasses.field(default_factory=dict)
     initial_state: Callable[[Params], State] | None = None
+
+    def __post_init__(self):
+        # parameters act or are refused: the fields the model does not read are refused
+        object.__setattr__(self, "params", self.params.for_model(self.model))
 
     @property
     def n_particles(self) -> int:

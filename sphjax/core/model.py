@@ -16,6 +16,7 @@ from __future__ import annotations
 import dataclasses
 
 from sphjax.core.kernels import Kernel, QuinticSpline
+from sphjax.core.params import GROUPS, fields, refusal
 
 
 @dataclasses.dataclass(frozen=True)
@@ -125,6 +126,34 @@ class Model:
     def system(self, cls):
         """The system of type ``cls``, or ``None``."""
         return next((s for s in self.systems if isinstance(s, cls)), None)
+
+    def parameters(self) -> frozenset[str] | None:
+        """The Params fields the systems read (``None`` if a system does not say)."""
+        if not all(hasattr(s, "parameters") for s in self.systems):
+            return None
+        return frozenset().union(*(s.parameters() for s in self.systems))
+
+    def unused_parameters(self) -> tuple[tuple[str, str], ...]:
+        """``(field, refusal)`` for each Params field that no system reads, in field order;
+        the refusal is one line naming the system and the choice that would read it.
+        Changing a field not listed can change the run.  ``()`` if a system does not say
+        what it reads."""
+        read = self.parameters()
+        if read is None:
+            return ()
+        unused = {}
+        for system in self.systems:
+            for name, why in getattr(system, "unused_parameters", dict)().items():
+                if name not in read:
+                    unused.setdefault(name, why)
+        system_of = {"fluid": "FluidSystem", "solid": "SolidSystem"}
+        for group, defaults in GROUPS.items():  # a group no system of the model reads
+            for name in defaults:
+                if name not in read and name not in unused:
+                    unused[name] = refusal(
+                        name, "model", f"it has no {group}", f"add a {system_of[group]}()"
+                    )
+        return tuple(sorted(unused.items(), key=lambda item: fields().index(item[0])))
 
     def replace(self, **changes) -> Model:
         return dataclasses.replace(self, **changes)

@@ -10,6 +10,13 @@ Fields are read and replaced by their names, whatever group they sit in:
 checked where they are set (positive densities and sound speed, non-negative viscosities,
 a Poisson's ratio in (-1, 0.5), finite numbers), so that bad input fails with the field
 named rather than as an unstable run.
+
+Parameters act or are refused.  A system and its choice objects say which fields they
+read (``parameters``); the Params of a :class:`~sphjax.Case` carry the fields its model
+does not read as static metadata (:attr:`Params.unused`), and ``replace`` refuses to set
+one, concrete value or tracer alike, with one line that names the field, the system and
+the choice that would read it (:class:`UnusedParameterError`).  So a run never silently
+ignores a value, and ``jax.grad`` never silently returns 0 for a field no equation reads.
 """
 
 from __future__ import annotations
@@ -23,6 +30,11 @@ import numpy as np
 from sphjax.core.pytree import pytree_dataclass
 
 Array = jax.Array
+
+
+class UnusedParameterError(ValueError):
+    """A Params field was set that the model does not read (its message says which
+    choice would read it)."""
 
 
 @pytree_dataclass
@@ -130,7 +142,7 @@ def _group_of(name: str) -> str | None:
     return None
 
 
-@pytree_dataclass
+@pytree_dataclass(static=("unused",))
 class Params:
     """Differentiable parameters of a simulation (a pytree).
 
@@ -139,11 +151,16 @@ class Params:
         unit mass.
       fluid: :class:`FluidParams`, or ``None`` when the model has no fluid.
       solid: :class:`SolidParams`, or ``None`` when the model has no solid.
+      unused: static metadata, not a leaf: ``(field, reason)`` for every field the model
+        does not read (set by :meth:`for_model`; a :class:`~sphjax.Case` sets it for its
+        model), ``reason`` the one-line refusal :meth:`replace` raises.  ``()`` (as
+        :func:`make_params` builds them): every field may be set.
     """
 
     gravity: Array
     fluid: FluidParams | None = None
     solid: SolidParams | None = None
+    unused: tuple[tuple[str, str], ...] = ()
 
     def __getattr__(self, name):
         group = _group_of(name)
@@ -156,11 +173,31 @@ class Params:
             )
         return getattr(values, name)
 
+    def for_model(self, model) -> Params:
+        """These Params as ``model`` reads them: the fields none of its systems read become
+        :attr:`unused`, which :meth:`replace` refuses (see ``Model.unused_parameters``)."""
+        present = {name for name, _ in self.items()}
+        unused = tuple(item for item in model.unused_parameters() if item[0] in present)
+        return self if unused == self.unused else dataclasses.replace(self, unused=unused)
+
+    def check_used(self, name: str) -> None:
+        """Raise :class:`UnusedParameterError` (one line: the field, the system, the choice
+        that would read it) if the model these Params were built for does not read ``name``."""
+        reason = dict(self.unused).get(name)
+        if reason is not None:
+            raise UnusedParameterError(reason)
+
     def replace(self, **changes) -> Params:
-        """A new Params with the named fields replaced (in whichever group they live)."""
+        """A new Params with the named fields replaced (in whichever group they live).
+
+        Raises :class:`UnusedParameterError` for a field the model does not read
+        (:attr:`unused`), whether the value is concrete or a tracer.
+        """
         dtype = self.gravity.dtype
         grouped: dict[str, dict] = {}
         top = {}
+        for name in changes:
+            self.check_used(name)
         for name, value in changes.items():
             check_value(name, value)
             if name == "gravity":
@@ -171,7 +208,7 @@ class Params:
                     )
                 top[name] = value
                 continue
-            if name in ("fluid", "solid"):
+            if name in ("fluid", "solid", "unused"):
                 top[name] = value
                 continue
             group = _group_of(name)
@@ -188,19 +225,40 @@ class Params:
             top[group] = dataclasses.replace(object.__getattribute__(self, group), **values)
         return dataclasses.replace(self, **top)
 
-    def items(self):
-        """``(name, value)`` of every field, flat (gravity first)."""
+    def items(self, used_only: bool = False):
+        """``(name, value)`` of every field, flat (gravity first); with ``used_only``, of
+        the fields the model reads (those not in :attr:`unused`)."""
+        skip = {name for name, _ in self.unused} if used_only else set()
         out = [("gravity", self.gravity)]
         for group in GROUPS:
             values = object.__getattribute__(self, group)
             if values is not None:
                 out += [(f.name, getattr(values, f.name)) for f in dataclasses.fields(values)]
-        return out
+        return [(name, value) for name, value in out if name not in skip]
 
 
 def fields() -> list[str]:
     """Every Params field name."""
     return ["gravity", *FLUID_DEFAULTS, *SOLID_DEFAULTS]
+
+
+def fields_read(choices, own=(), group: str = "fluid") -> frozenset[str]:
+    """The Params fields a system reads: its ``own`` and each choice object's
+    ``parameters``; a choice that does not say (a user's own) counts as reading every field
+    of the system's ``group``, so that nothing it might read is refused."""
+    read = set(own)
+    for choice in choices:
+        if choice is None:
+            continue
+        names = getattr(choice, "parameters", None)
+        read |= set(GROUPS[group]) if names is None else set(names)
+    return frozenset(read)
+
+
+def refusal(name: str, system: str, why: str, fix: str) -> str:
+    """The one-line refusal of setting ``name``: ``"kinematic_viscosity is not used by this
+    fluid (artificial viscosity only): add MorrisViscosity() to its viscosity to use it"``."""
+    return f"{name} is not used by this {system} ({why}): {fix} to use it"
 
 
 def _as_float(value, dtype):

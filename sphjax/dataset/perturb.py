@@ -230,14 +230,16 @@ def sample_params(
 
 
 def check_vary(params: Params, vary: Mapping[str, tuple[float, float]]) -> dict:
-    """Validate ``vary``: scalar Params fields with ``lo <= hi``."""
+    """Validate ``vary``: scalar Params fields the model reads, with ``lo <= hi``."""
     scalar = [name for name, value in params.items() if np.ndim(value) == 0]
+    used = [name for name, value in params.items(used_only=True) if np.ndim(value) == 0]
     out = {}
     for name, rng in vary.items():
         if name not in scalar:
             raise ValueError(
-                f"vary: {name!r} is not a scalar Params field; choose from {', '.join(scalar)}"
+                f"vary: {name!r} is not a scalar Params field; choose from {', '.join(used)}"
             )
+        params.check_used(name)
         lo, hi = (float(v) for v in rng)
         if not lo <= hi:
             raise ValueError(f"vary: {name}={lo}:{hi} needs lo <= hi")

@@ -43,6 +43,15 @@ class WallSystem:
                 f"WallSystem.boundary must be AdamiBoundary(...), got {self.boundary!r}"
             )
 
+    def parameters(self) -> frozenset[str]:
+        """The Params fields the walls read: ``gravity`` (the wall pressure); the fluid's
+        equation of state they use is the fluid's, counted there."""
+        return frozenset({"gravity"})
+
+    def unused_parameters(self) -> dict[str, str]:
+        """No Params group of its own, so nothing to refuse."""
+        return {}
+
     def replace(self, **changes) -> WallSystem:
         return dataclasses.replace(self, **changes)
 

@@ -79,9 +79,15 @@ class MolteniColagrossi:
     """Molteni & Colagrossi (2009) delta-SPH with the hydrostatic correction;
     coefficient ``Params.density_diffusion``."""
 
+    #: the Params fields the diffusion term and its hydrostatic correction read
+    parameters = ("density_diffusion", "sound_speed", "reference_density", "gravity")
+
 
 @dataclasses.dataclass(frozen=True)
 class Antuono:
     """Antuono et al. (2010, 2012) delta-SPH: Molteni & Colagrossi's term less the
     renormalised density gradients, computed in the fluid's update stage; coefficient
     ``Params.density_diffusion`` (0.1 in the papers)."""
+
+    #: the Params fields the diffusion term reads
+    parameters = ("density_diffusion", "sound_speed")

@@ -62,6 +62,9 @@ class TaitEOS:
 
     gamma: float = 7.0
 
+    #: the Params fields eq. 12 reads
+    parameters = ("reference_density", "sound_speed", "reference_pressure", "background_pressure")
+
     def _constants(self, fluid):
         """``(rho0, c0, gamma, p0, p_background)`` of eq. 12 from the fluid's Params."""
         return (
@@ -82,6 +85,9 @@ class TaitEOS:
 @dataclasses.dataclass(frozen=True)
 class LinearEOS:
     """Linear equation of state ``p = c0^2 (rho - rho0) + p0 - p_background``."""
+
+    #: the Params fields eq. 12 reads
+    parameters = ("reference_density", "sound_speed", "reference_pressure", "background_pressure")
 
     def _constants(self, fluid):
         """``(rho0, c0, p0, p_background)`` from the fluid's Params."""

@@ -104,6 +104,9 @@ class TransportVelocity:
 
     pressure_factor: float = 1.0
 
+    #: the Params fields ``p_b`` reads
+    parameters = ("transport_pressure", "reference_density", "sound_speed")
+
     def __post_init__(self):
         try:
             factor = float(self.pressure_factor)

@@ -24,6 +24,7 @@ import functools
 import jax.numpy as jnp
 
 from sphjax.core import kernels
+from sphjax.core.params import FLUID_DEFAULTS, fields_read, refusal
 from sphjax.core.space import scale
 from sphjax.core.state import Kind
 from sphjax.physics import pairs as pair_sums
@@ -112,6 +113,54 @@ class FluidSystem:
     @property
     def physical_viscosity(self) -> bool:
         return any(isinstance(v, MorrisViscosity) for v in self.viscosity)
+
+    def parameters(self) -> frozenset[str]:
+        """The Params fields this fluid reads: ``gravity`` (eq. 10) and those its choices
+        read (equation of state, viscosities, density diffusion, transport velocity)."""
+        choices = (
+            self.equation_of_state,
+            *self.viscosity,
+            self.density_diffusion,
+            self.transport_velocity,
+        )
+        return fields_read(choices, own=("gravity",), group="fluid")
+
+    def unused_parameters(self) -> dict[str, str]:
+        """``{field: refusal}`` for the fluid fields this fluid does not read, each refusal
+        naming the choice that would read it."""
+        terms = [
+            name
+            for name, on in (
+                ("artificial", self.artificial_viscosity),
+                ("Morris", self.physical_viscosity),
+            )
+            if on
+        ]
+        viscosity = f"{' and '.join(terms)} viscosity only" if terms else "no viscosity"
+        artificial = (viscosity, "add ArtificialViscosity() to the fluid's viscosity")
+        continuity = isinstance(self.density, ContinuityDensity)
+        hints = {
+            "artificial_alpha": artificial,
+            "artificial_beta": artificial,
+            "kinematic_viscosity": (viscosity, "add MorrisViscosity() to the fluid's viscosity"),
+            "transport_pressure": (
+                "no transport velocity",
+                "give the fluid transport_velocity=TransportVelocity()",
+            ),
+            "density_diffusion": (
+                "no density diffusion",
+                "give the fluid "
+                + ("" if continuity else "ContinuityDensity() and ")
+                + "density_diffusion=MolteniColagrossi() or Antuono()",
+            ),
+        }
+        read = self.parameters()
+        generic = ("its choices do not read it", "choose one that does")
+        return {
+            name: refusal(name, "fluid", *hints.get(name, generic))
+            for name in FLUID_DEFAULTS
+            if name not in read
+        }
 
     def replace(self, **changes) -> FluidSystem:
         return dataclasses.replace(self, **changes)

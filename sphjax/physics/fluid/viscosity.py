@@ -105,7 +105,13 @@ def morris_acceleration_pullback(
 class ArtificialViscosity:
     """Monaghan's artificial viscosity ``Pi_ab`` in eq. 10."""
 
+    #: the Params fields ``Pi_ab`` reads
+    parameters = ("artificial_alpha", "artificial_beta", "sound_speed")
+
 
 @dataclasses.dataclass(frozen=True)
 class MorrisViscosity:
     """Morris et al. (1997) laminar viscosity with ``Params.kinematic_viscosity``."""
+
+    #: the Params field the laminar term reads
+    parameters = ("kinematic_viscosity",)

@@ -54,6 +54,9 @@ class StVenantKirchhoff:
     """St Venant-Kirchhoff material (eqs. 17-19) with ``young_modulus`` and
     ``poisson_ratio``; plane strain in 2D."""
 
+    #: the Params fields the Lamé constants (eq. 19) read
+    parameters = ("young_modulus", "poisson_ratio")
+
     def pk1(self, F, solid):
         """First Piola-Kirchhoff stress ``P = F S(E(F))``."""
         lam, mu = lame_constants(solid.young_modulus, solid.poisson_ratio)

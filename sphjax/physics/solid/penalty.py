@@ -46,3 +46,6 @@ def penalty_force(reference_pair, dx, F_a, F_b, volume_a, volume_b, young_modulu
 @dataclasses.dataclass(frozen=True)
 class PenaltyForce:
     """Ganzenmüller's (2015) hourglass penalty with ``Params.penalty_alpha``."""
+
+    #: the Params fields the penalty force reads
+    parameters = ("penalty_alpha", "young_modulus")

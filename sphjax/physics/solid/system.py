@@ -32,6 +32,7 @@ from typing import Any
 
 import jax.numpy as jnp
 
+from sphjax.core.params import SOLID_DEFAULTS, fields_read, refusal
 from sphjax.core.space import displacement_fn
 from sphjax.core.state import Kind
 from sphjax.physics import pairs as pair_sums
@@ -95,6 +96,24 @@ class SolidSystem:
                 f"SolidSystem.substeps must be a positive integer (1: no split integration), "
                 f"got {self.substeps!r}"
             )
+
+    def parameters(self) -> frozenset[str]:
+        """The Params fields this solid reads: ``gravity`` and ``solid_density`` (eq. 14)
+        and those of its material and penalty force."""
+        return fields_read(
+            (self.material, self.penalty), own=("gravity", "solid_density"), group="solid"
+        )
+
+    def unused_parameters(self) -> dict[str, str]:
+        """``{field: refusal}`` for the solid fields this solid does not read."""
+        hints = {"penalty_alpha": ("no penalty force", "give the solid penalty=PenaltyForce()")}
+        generic = ("its choices do not read it", "choose one that does")
+        read = self.parameters()
+        return {
+            name: refusal(name, "solid", *hints.get(name, generic))
+            for name in SOLID_DEFAULTS
+            if name not in read
+        }
 
     def replace(self, **changes) -> SolidSystem:
         return dataclasses.replace(self, **changes)
