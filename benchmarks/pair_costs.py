@@ -7,7 +7,9 @@ Every pair sum that one evaluation of the case's right-hand side makes is record
 summand, fields, list and parameters) and then timed on its own, float32, compiled, in
 CPU-milliseconds of this process (best of ``--repeat``): the forward, and the forward
 and reverse together (``jax.vjp`` and its pull-back of a unit cotangent), with the pair
-sums' custom adjoint (``adjoint``) and with autodiff's transpose (``autodiff``).  Beside
+sums' custom adjoint (``adjoint``, also for summands marked
+:func:`~sphjax.physics.pairs.transpose_by_autodiff`) and with autodiff's transpose
+(``autodiff``), and which of the two the package uses (``chosen``).  Beside
 them, XLA's temporary memory for the reverse pass per neighbour slot of the list
 (``temp bytes per slot``: the per-pair arrays it keeps; a block of ``pair_block`` rows at
 a time for the custom adjoint).  A benchmark reports; it asserts nothing.
@@ -73,6 +75,19 @@ def _cpu_ms(compiled, args, repeat):
 
 
 def time_call(call, adjoint: bool, repeat: int):
+    """CPU-ms of the forward and of forward + reverse, and the reverse's temporary bytes;
+    ``adjoint``: the custom adjoint, also for a summand marked ``transpose_by_autodiff``."""
+    f = call["f"]
+    func = f.func if isinstance(f, functools.partial) else f
+    marked = getattr(func, "transpose_by_autodiff", False)
+    func.transpose_by_autodiff = False if adjoint else marked
+    try:
+        return _time_call(call, adjoint, repeat)
+    finally:
+        func.transpose_by_autodiff = marked
+
+
+def _time_call(call, adjoint: bool, repeat: int):
     options = {
         k: v
         for k, v in call.items()
@@ -106,7 +121,8 @@ def main(argv=None):
     runs = DEFAULT if args.case is None else ((args.case, args.n or 20),)
     print(
         f"{'case':>18} {'pair sum':>28} {'slots':>9} {'fwd ms':>7} "
-        f"{'adjoint':>8} {'ratio':>6} {'autodiff':>9} {'ratio':>6} {'temp B/slot':>11}"
+        f"{'adjoint':>8} {'ratio':>6} {'autodiff':>9} {'ratio':>6} {'temp B/slot':>11} "
+        f"{'chosen':>8}"
     )
     for name, n in runs:
         case = sphjax.cases.get(name, n=n)
@@ -117,9 +133,11 @@ def main(argv=None):
             _, rev_auto, _ = time_call(call, False, args.repeat)
             block = case.model.pair_block or idx.shape[0]
             per_slot = temp / (min(block, idx.shape[0]) * idx.shape[1])
+            chosen = "autodiff" if pair_module._autodiff_transposes(call["f"]) else "adjoint"
             print(
                 f"{name:>18} {_name(call['f']):>28} {slots:>9d} {fwd:7.2f} {rev:8.2f} "
-                f"{rev / fwd:6.2f} {rev_auto:9.2f} {rev_auto / fwd:6.2f} {per_slot:11.0f}",
+                f"{rev / fwd:6.2f} {rev_auto:9.2f} {rev_auto / fwd:6.2f} {per_slot:11.0f} "
+                f"{chosen:>8}",
                 flush=True,
             )
 

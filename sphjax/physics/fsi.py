@@ -32,6 +32,7 @@ from __future__ import annotations
 
 import jax.numpy as jnp
 
+from sphjax.physics import pairs as pair_sums
 from sphjax.physics.boundary.wall import extrapolation_terms, wall_pressure, wall_velocity
 
 
@@ -47,6 +48,11 @@ def fluid_view_of_solid(solid: dict, fluid_params) -> dict:
 
 def _extrapolation_summand(pair, a, b, shared):
     return extrapolation_terms(pair, b["p"], b["rho"], b["v"])
+
+
+# measured: autodiff's transpose keeps the quotient's sums and costs less than half the
+# custom adjoint's (docs/performance_gradients.md)
+pair_sums.transpose_by_autodiff(_extrapolation_summand)
 
 
 def update_solid_boundary(system, solid: dict, fluid_system, fluid: dict, pairs, ctx) -> dict:

@@ -113,19 +113,18 @@ class Geometry:
         h, dim = self.smoothing_length, self.dim
         w = jnp.where(mask, kernels.W(self.kernel, r, h, dim), 0.0)
         r_safe = jnp.where(inside, r, 1.0)
-        # one division per pair; the factors below multiply by its result
+        if not second:
+            # (measured: dividing here is faster in the forward than multiplying by 1 / r)
+            factor = jnp.where(inside, kernels.dW_dr(self.kernel, r_safe, h, dim) / r_safe, 0.0)
+            return PairGeometry(dr=dr, r=r, w=w, grad_w=factor[..., None] * dr, mask=mask), None
+        # the adjoint: one division per pair; the factors below multiply by its result
         inverse_r = jnp.where(inside, 1.0 / r_safe, 0.0)
-        if second:
-            first, curvature = jax.jvp(
-                lambda r: kernels.dW_dr(self.kernel, r, h, dim), (r_safe,), (jnp.ones_like(r),)
-            )
-        else:
-            first = kernels.dW_dr(self.kernel, r_safe, h, dim)
+        first, curvature = jax.jvp(
+            lambda r: kernels.dW_dr(self.kernel, r, h, dim), (r_safe,), (jnp.ones_like(r),)
+        )
         factor = first * inverse_r
         grad_w = factor[..., None] * dr
         pair = PairGeometry(dr=dr, r=r, w=w, grad_w=grad_w, mask=mask)
-        if not second:
-            return pair, None
         g = (curvature - factor) * inverse_r * inverse_r
         return pair, (factor, g, inverse_r)
 
@@ -209,6 +208,21 @@ def define_pullback(summand: Callable, pullback: Callable) -> None:
     (``tests/test_pullbacks.py``).
     """
     summand.pullback = pullback
+
+
+def transpose_by_autodiff(summand: Callable) -> Callable:
+    """Mark the per-pair ``summand`` as one whose pair sum is cheaper in reverse mode with
+    autodiff's transpose of the forward (which keeps the forward's per-pair residuals)
+    than with the custom adjoint (which recomputes the pair geometry in blocks):
+    :func:`pair_sum` then attaches no custom adjoint to it.  The choice is a measurement
+    (``benchmarks/pair_costs.py``, docs/performance_gradients.md), made per summand."""
+    summand.transpose_by_autodiff = True
+    return summand
+
+
+def _autodiff_transposes(f) -> bool:
+    func = f.func if isinstance(f, functools.partial) else f
+    return getattr(func, "transpose_by_autodiff", False)
 
 
 def _pullback_of(f):
@@ -699,7 +713,7 @@ def pair_sum(
         raise ValueError("pair_sum: parity needs a sum within one system and a weight")
     if pairs.members is not None:
         return _member_sum(f, rows, cols, pairs, geometry, shared, weight, adjoint, block)
-    if not adjoint:
+    if not adjoint or _autodiff_transposes(f):
         full = _weighted(f, weight)
         return _forward(full, geometry, None, rows, rows if same else cols, shared, pairs.idx)
     rows_leaves, rows_def = jax.tree_util.tree_flatten(rows)

@@ -179,6 +179,7 @@ def _kernel_pullback(pair, a, b, shared, bar):
 
 
 pair_sums.define_pullback(_kernel_summand, _kernel_pullback)
+pair_sums.transpose_by_autodiff(_kernel_summand)
 
 
 def _velocity_divergence_summand(pair, a, b, shared):

@@ -153,6 +153,7 @@ def _deformation_pullback(pair, a, b, shared, bar, *, domain):
 
 
 pair_sums.define_pullback(_deformation_summand, _deformation_pullback)
+pair_sums.transpose_by_autodiff(_deformation_summand)
 
 
 def solid_reference(solid: dict, pairs, ctx) -> dict:
