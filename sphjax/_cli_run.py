@@ -264,7 +264,9 @@ def run_case(args, out: Path) -> int:
         "save_every": p.save_every,
     }
     try:
-        writer = TrajectoryWriter(out, case, dt=p.dt, attrs=attrs, argument="--out")
+        writer = TrajectoryWriter(
+            out, case, dt=p.dt, attrs=attrs, argument="--out", overwrite=args.overwrite
+        )
     except (ValueError, OSError) as err:
         raise UsageError(None, str(err)) from None
     bar = tqdm(total=p.n_steps, unit="step", disable=args.quiet, file=sys.stderr)

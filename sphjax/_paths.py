@@ -39,3 +39,24 @@ def check_writable(path, argument: str = "path") -> Path:
             "remove it, change its permissions or choose another path"
         )
     return path
+
+
+def overwrite_flag(argument: str) -> str:
+    """How to allow replacing an output: ``--overwrite`` on the command line (an argument
+    named like ``--out``), ``overwrite=True`` in Python."""
+    return "--overwrite" if argument.startswith("-") else "overwrite=True"
+
+
+def exists_message(path, argument: str) -> str:
+    """The one line that refuses to replace an existing output (every command and writer)."""
+    return f"'{path}' exists; pass {overwrite_flag(argument)} to replace it, or choose another path"
+
+
+def check_new(paths, argument: str = "path", overwrite: bool = False) -> None:
+    """Raise FileExistsError (``argument: 'x' exists; pass --overwrite ...``) if one of
+    ``paths`` exists and ``overwrite`` is false: no output is replaced silently."""
+    if overwrite:
+        return
+    for path in paths:
+        if Path(path).exists():
+            raise FileExistsError(f"{argument}: {exists_message(path, argument)}")

@@ -283,6 +283,7 @@ def _add_plot(sub) -> None:
         "particle type",
     )
     plot.add_argument("--out", required=True, help="output image, e.g. frame.png")
+    plot.add_argument("--overwrite", action="store_true", help="replace an existing --out")
     plot.add_argument("--slice", metavar="AXIS=VALUE", default=None, help=_SLICE_HELP)
 
 
@@ -395,7 +396,7 @@ def _add_dataset(sub) -> None:
 
 def _output_file(path, argument: str, overwrite: bool, suffixes=None) -> Path:
     """Check an output file before any work: writable, suffix known, not silently replaced."""
-    from sphjax._paths import check_writable
+    from sphjax._paths import check_writable, exists_message
 
     try:
         out = check_writable(path, argument)
@@ -408,9 +409,7 @@ def _output_file(path, argument: str, overwrite: bool, suffixes=None) -> Path:
             f"{', '.join(sorted(suffixes))}",
         )
     if out.exists() and not overwrite:
-        raise UsageError(
-            argument, f"'{out}' exists; pass --overwrite to replace it, or choose another path"
-        )
+        raise UsageError(argument, exists_message(out, argument))
     return out
 
 
@@ -429,10 +428,12 @@ def _trajectory_metadata(path) -> dict:
 
 def _read_frames(path, frames=None):
     """``read_trajectory`` with damaged files reported as bad input."""
-    from sphjax.io import read_trajectory
+    from sphjax.io import FileLockedError, read_trajectory
 
     try:
         return read_trajectory(path, frames=frames)
+    except FileLockedError as err:  # in use, not damaged
+        raise UsageError("FILE.h5", str(err)) from None
     except (FileNotFoundError, ValueError, OSError, KeyError, RuntimeError) as err:
         raise UsageError(
             "FILE.h5", f"cannot read the frames of '{path}' (the file is damaged?): {err}"
@@ -485,13 +486,12 @@ def cmd_cases(args) -> int:
 
 
 def cmd_run(args) -> int:
+    from sphjax._paths import exists_message
     from sphjax.xdmf import xdmf_path
 
     out = _output_file(args.out, "--out", args.overwrite, {".h5", ".hdf5"})
-    if xdmf_path(out).exists() and not args.overwrite:
-        raise UsageError(
-            "--out", f"'{xdmf_path(out)}' exists; pass --overwrite to replace it with the run's"
-        )
+    if xdmf_path(out).exists() and not args.overwrite:  # the run writes its description too
+        raise UsageError("--out", exists_message(xdmf_path(out), "--out"))
     if args.float64:
         import jax
 
@@ -512,13 +512,14 @@ def _run(args, out: Path) -> int:
 def cmd_plot(args) -> int:
     from sphjax.plot import IMAGE_SUFFIXES, FramePlot
 
-    out = _output_file(args.out, "--out", True, IMAGE_SUFFIXES)
+    out = _output_file(args.out, "--out", args.overwrite, IMAGE_SUFFIXES)
     meta = _trajectory_metadata(args.file)
     n = meta["n_frames"]
     if not -n <= args.frame < n:
         raise UsageError("--frame", f"{args.frame} is out of range; the file holds {n} frames")
     plane = _slice_plane(args)
-    trajectory, _ = _read_frames(args.file, frames=args.frame)
+    # by its number: a run in progress may have written more frames since
+    trajectory, _ = _read_frames(args.file, frames=args.frame % n)
     try:
         figure = FramePlot(
             trajectory, meta, args.field, frame_offset=args.frame % n, slice_plane=plane
@@ -541,7 +542,7 @@ def cmd_animate(args) -> int:
     out = _output_file(args.out, "--out", args.overwrite, MOVIE_SUFFIXES)
     meta = _trajectory_metadata(args.file)
     plane = _slice_plane(args)
-    trajectory, _ = _read_frames(args.file, frames=slice(None, None, args.every))
+    trajectory, _ = _read_frames(args.file, frames=slice(0, meta["n_frames"], args.every))
     try:
         n = animate(
             trajectory, meta, args.field, out, fps=args.fps, progress=not args.quiet,

@@ -10,10 +10,21 @@ File layout (one file per run, h5py)::
 
 Every dataset has an unlimited, chunked leading time axis (one chunk per frame).
 :class:`TrajectoryWriter` is an ``on_frames`` callback for :func:`sphjax.simulate`: it
-appends each block of frames and flushes the file, so a run that is killed or goes
-unstable keeps every frame already written.  ``complete`` becomes true only when the
-writer is closed after a run that raised nothing.  Beside the file it keeps an XDMF
-description (``run.h5`` -> ``run.xdmf``, :mod:`sphjax.xdmf`) that ParaView opens.
+opens the file, appends a block of frames and closes it again, so a run that is killed or
+goes unstable keeps every frame already written, and other processes (``sphjax plot``,
+:func:`read_trajectory`, h5py, ParaView) can read the file while the run writes it.
+``complete`` becomes true only when the writer is closed after a run that raised
+nothing.  Beside the file it keeps an XDMF description (``run.h5`` -> ``run.xdmf``,
+:mod:`sphjax.xdmf`) that ParaView opens.
+
+Why not HDF5's single-writer/multiple-reader mode: a file in SWMR mode can be opened only
+by readers that ask for it (``h5py.File(path, "r", swmr=True)``); VTK's XDMF reader
+(ParaView's) and plain h5py are refused ("file is already open for write"), and the file
+needs HDF5 >= 1.10 to be read at all.  Releasing the file between blocks serves every
+reader, and the file stays in the oldest HDF5 format.  HDF5's file lock still separates
+the two sides for the milliseconds of an append: a reader that finds the file locked
+waits for the append to finish (:data:`LOCK_WAIT_S`); a file locked for longer, by
+another writer, is reported as locked (:class:`FileLockedError`), not as damaged.
 
     with sphjax.io.TrajectoryWriter("run.h5", case) as writer:
         sphjax.simulate(case, t_end=0.1, save_every=10, on_frames=writer)
@@ -23,8 +34,10 @@ description (``run.h5`` -> ``run.xdmf``, :mod:`sphjax.xdmf`) that ParaView opens
 from __future__ import annotations
 
 import dataclasses
+import errno
 import json
 import math
+import os
 import time
 import warnings
 from pathlib import Path
@@ -35,7 +48,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from sphjax._paths import check_writable
+from sphjax._paths import check_new, check_writable
 from sphjax.core.case import Case
 from sphjax.core.kernels import KERNELS
 from sphjax.core.params import Params, make_params
@@ -45,6 +58,12 @@ from sphjax.xdmf import write_xdmf, xdmf_path
 FORMAT = "sphjax-trajectory"
 FORMAT_VERSION = 1
 STATE_FIELDS = tuple(f.name for f in dataclasses.fields(State))
+
+# How long (s) a reader waits for a writer's append to finish, and a writer for a reader
+# that holds the file, before a file lock is reported (reader) or stepped around (writer).
+LOCK_WAIT_S = 5.0
+WRITER_LOCK_WAIT_S = 2.0
+_LOCK_POLL_S = 0.02
 
 
 # ---------------------------------------------------------------------------- metadata
@@ -94,14 +113,105 @@ def model_to_dict(model) -> dict[str, Any]:
     return out
 
 
+# ---------------------------------------------------------------------------- file locks
+
+
+class FileLockedError(ValueError):
+    """A trajectory file that another process holds open for writing: a file in use, not
+    a damaged one.  The message names the file and what to do."""
+
+
+def _is_lock_error(err: BaseException) -> bool:
+    """Whether h5py failed to take HDF5's file lock (another process holds the file)."""
+    return isinstance(err, OSError) and (
+        err.errno in (errno.EAGAIN, errno.EWOULDBLOCK, errno.EACCES) and "lock" in str(err).lower()
+    )
+
+
+def _locked_message(path) -> str:
+    return (
+        f"'{path}' is locked: another process has it open for writing; wait until that "
+        "process closes it (a run releases the file between blocks of frames), then try again"
+    )
+
+
+def _open_waiting(path, mode: str, wait: float, **kwargs) -> h5py.File:
+    """``h5py.File(path, mode)``, retrying for up to ``wait`` seconds while another
+    process holds HDF5's lock on the file."""
+    deadline = time.monotonic() + wait
+    while True:
+        try:
+            return h5py.File(path, mode, **kwargs)
+        except OSError as err:
+            if not _is_lock_error(err) or time.monotonic() >= deadline:
+                raise
+        time.sleep(_LOCK_POLL_S)
+
+
+def _identity(path) -> tuple[int, int] | None:
+    """The file at ``path`` (device, inode), or None if there is none."""
+    try:
+        st = os.stat(path)
+    except FileNotFoundError:
+        return None
+    return st.st_dev, st.st_ino
+
+
+def _held_by_a_writer(path) -> bool:
+    """Whether another process holds an exclusive lock on ``path`` (a writer), rather than
+    only shared ones (readers).  HDF5 locks with ``flock`` on POSIX systems."""
+    try:
+        import fcntl
+    except ImportError:  # no flock: assume the worst
+        return True
+    try:
+        fd = os.open(path, os.O_RDONLY)
+    except OSError:  # unreadable or gone: no lock to find
+        return False
+    try:
+        fcntl.flock(fd, fcntl.LOCK_SH | fcntl.LOCK_NB)
+    except OSError:
+        return True
+    finally:
+        os.close(fd)  # releases the probe's lock
+    return False
+
+
+def _open_for_reading(path) -> h5py.File:
+    """Open a trajectory file for reading, also while a run writes it.
+
+    Waits out an append in progress (:data:`LOCK_WAIT_S`); a file locked for longer raises
+    :class:`FileLockedError`.  A file that an HDF5 SWMR writer holds is opened in SWMR
+    read mode."""
+    try:
+        return _open_waiting(path, "r", LOCK_WAIT_S)
+    except OSError as err:
+        if _is_lock_error(err):
+            raise FileLockedError(_locked_message(path)) from None
+        if "already open for write" not in str(err):  # h5py gives no errno for this one
+            raise
+    try:  # marked as open for writing: an SWMR writer, or a writer that was killed
+        return h5py.File(path, "r", swmr=True)
+    except OSError:
+        raise FileLockedError(
+            f"'{path}' is marked as open for writing by another program; wait until it "
+            f"closes the file, or, if that program was killed, clear the mark with "
+            f"`h5clear -s {path}`"
+        ) from None
+
+
 # ---------------------------------------------------------------------------- writer
 
 
 class TrajectoryWriter:
     """Append frames of a run to an HDF5 file; usable as ``simulate(..., on_frames=writer)``.
 
-    The file is created (or truncated) when the writer is made, so an unwritable path
-    fails before the run starts.  Each call appends a block of frames and flushes.
+    The file is created when the writer is made, so an unwritable path fails before the
+    run starts; an existing file (or its XDMF description) is replaced only with
+    ``overwrite=True``, as ``sphjax run --overwrite``.  Each call opens the file, appends a
+    block of frames and closes it, so other processes can read the run while it is
+    written (h5py, :func:`read_trajectory`, ParaView on the XDMF description), and a
+    killed run leaves a readable file.
 
     Args:
       path: the ``.h5`` file to write.
@@ -115,6 +225,14 @@ class TrajectoryWriter:
         see :mod:`sphjax.xdmf`), so ParaView opens the run: after a block of frames (at
         most ~5 % of the run's time goes to it; long series are rewritten less often)
         and when the writer is closed.
+      overwrite: replace an existing file (and description); without it an existing one
+        raises :class:`FileExistsError` (``path: 'run.h5' exists; pass overwrite=True to
+        replace it, or choose another path``).
+
+    A reader that keeps the file open for longer than :data:`WRITER_LOCK_WAIT_S` (h5py in
+    a notebook) does not stall the run: the writer then appends without HDF5's file lock,
+    and that reader sees the new frames when it opens the file again.  Another *writer*
+    holding the file raises :class:`FileLockedError`.
     """
 
     def __init__(
@@ -127,53 +245,89 @@ class TrajectoryWriter:
         attrs: dict[str, Any] | None = None,
         argument: str = "path",
         xdmf: bool = True,
+        overwrite: bool = False,
     ):
         self.path = check_writable(path, argument)
         self.xdmf = xdmf_path(self.path) if xdmf else None
+        check_new([self.path, *([self.xdmf] if xdmf else [])], argument, overwrite)
+        self._argument = argument
         self._xdmf_next = 0.0
+        self._closed = False
+        self._reader_holds = False  # a reader kept the file open past WRITER_LOCK_WAIT_S
+        self.n_frames = 0
+        if self.path.exists():  # overwrite=True
+            if _held_by_a_writer(self.path):
+                raise FileLockedError(
+                    f"{argument}: cannot replace '{self.path}': another process has it open "
+                    "for writing; wait until it closes it, or choose another path"
+                )
+            # a new file rather than a truncated one: a reader of the old one keeps it
+            self.path.unlink()
         try:
-            self._file = h5py.File(self.path, "w")
+            f = h5py.File(self.path, "w-")
         except OSError as err:
             raise ValueError(f"{argument}: cannot create '{self.path}': {err}") from None
-        self.n_frames = 0
-        a = self._file.attrs
-        from sphjax import __version__
+        self._identity = _identity(self.path)
+        with f:
+            a = f.attrs
+            from sphjax import __version__
 
-        a["format"] = FORMAT
-        a["format_version"] = FORMAT_VERSION
-        a["sphjax_version"] = __version__
-        a["complete"] = False
-        a["error"] = ""
-        if case is not None:
-            params = case.params if params is None else params
-            dt = case.dt if dt is None else dt
-            a["case"] = case.name
-            a["model"] = json.dumps(model_to_dict(case.model))
-            a["case_info"] = json.dumps(_jsonable(case.info))
-            a["n_particles"] = case.n_particles
-        if dt is not None:
-            a["dt"] = float(dt)
-        if params is not None:
-            group = self._file.create_group("params")
-            for name, value in params.items():
-                group.attrs[name] = np.asarray(value)
-            if params.unused:  # the refused fields, so that the Params read back refuse them
-                group.attrs[_UNUSED] = json.dumps([list(item) for item in params.unused])
-        for key, value in (attrs or {}).items():
-            a[key] = json.dumps(_jsonable(value))
-        self._flush()
+            a["format"] = FORMAT
+            a["format_version"] = FORMAT_VERSION
+            a["sphjax_version"] = __version__
+            a["complete"] = False
+            a["error"] = ""
+            a["n_frames"] = 0
+            if case is not None:
+                params = case.params if params is None else params
+                dt = case.dt if dt is None else dt
+                a["case"] = case.name
+                a["model"] = json.dumps(model_to_dict(case.model))
+                a["case_info"] = json.dumps(_jsonable(case.info))
+                a["n_particles"] = case.n_particles
+            if dt is not None:
+                a["dt"] = float(dt)
+            if params is not None:
+                group = f.create_group("params")
+                for name, value in params.items():
+                    group.attrs[name] = np.asarray(value)
+                if params.unused:  # the refused fields, so that the Params read back refuse them
+                    group.attrs[_UNUSED] = json.dumps([list(item) for item in params.unused])
+            for key, value in (attrs or {}).items():
+                a[key] = json.dumps(_jsonable(value))
+            self._write_xdmf(f)
 
     # The XDMF text grows with the frames, so it is rewritten only when at least this many
     # times the duration of its last rewrite has passed (at most ~5 % of a run's time).
     XDMF_PACE = 20.0
 
-    def _flush(self, xdmf: bool = False) -> None:
-        self._file.flush()
-        now = time.perf_counter()
-        if self.xdmf is not None and (xdmf or now >= self._xdmf_next):
-            write_xdmf(self._file, self.xdmf)
+    def _write_xdmf(self, f: h5py.File, now: bool = True) -> None:
+        start = time.perf_counter()
+        if self.xdmf is not None and (now or start >= self._xdmf_next):
+            write_xdmf(f, self.xdmf)
             done = time.perf_counter()
-            self._xdmf_next = done + self.XDMF_PACE * (done - now)
+            self._xdmf_next = done + self.XDMF_PACE * (done - start)
+
+    def _open(self) -> h5py.File:
+        """The file, opened for one block of writes (closed again after it)."""
+        if self._closed:
+            raise RuntimeError(f"TrajectoryWriter for '{self.path}' is already closed")
+        if _identity(self.path) != self._identity:
+            raise FileNotFoundError(
+                f"{self._argument}: '{self.path}' was removed or replaced while the run "
+                f"wrote it; the frames from now on are not saved"
+            )
+        try:
+            wait = 0.0 if self._reader_holds else WRITER_LOCK_WAIT_S
+            return _open_waiting(self.path, "r+", wait)
+        except OSError as err:
+            if not _is_lock_error(err):
+                raise
+            if _held_by_a_writer(self.path):
+                raise FileLockedError(_locked_message(self.path)) from None
+        # only readers hold it, longer than an append takes: append without the lock
+        self._reader_holds = True
+        return h5py.File(self.path, "r+", locking=False)
 
     # on_frames protocol
     def __call__(self, states: State, times) -> None:
@@ -181,7 +335,7 @@ class TrajectoryWriter:
 
     def append(self, states: State, times) -> None:
         """Append frames: ``states`` with a leading frame axis, ``times`` of shape ``[k]``."""
-        if self._file is None:
+        if self._closed:
             raise RuntimeError(f"TrajectoryWriter for '{self.path}' is already closed")
         times = np.asarray(times)
         k = int(times.shape[0])
@@ -191,53 +345,60 @@ class TrajectoryWriter:
         for name, x in arrays.items():
             if x.shape[:1] != (k,):
                 raise ValueError(f"states.{name} has {x.shape[:1]} frames but times has {k}")
-        group = self._file.require_group("states")
-        if self.n_frames == 0:
-            for name, x in arrays.items():
-                group.create_dataset(
-                    name, shape=(0, *x.shape[1:]), maxshape=(None, *x.shape[1:]),
-                    dtype=x.dtype, chunks=(1, *x.shape[1:]) if x.ndim > 1 else (256,),
-                )  # fmt: skip
-            self._file.create_dataset(
-                "times", shape=(0,), maxshape=(None,), dtype=times.dtype, chunks=(256,)
-            )
-        end = self.n_frames + k
-        for name, x in arrays.items():
-            dataset = group[name]
-            if dataset.shape[1:] != x.shape[1:]:
-                raise ValueError(
-                    f"states.{name} has per-frame shape {x.shape[1:]}, but the file holds "
-                    f"frames of shape {dataset.shape[1:]}"
+        with self._open() as f:
+            group = f.require_group("states")
+            if self.n_frames == 0 and "times" not in f:
+                for name, x in arrays.items():
+                    group.create_dataset(
+                        name, shape=(0, *x.shape[1:]), maxshape=(None, *x.shape[1:]),
+                        dtype=x.dtype, chunks=(1, *x.shape[1:]) if x.ndim > 1 else (256,),
+                    )  # fmt: skip
+                f.create_dataset(
+                    "times", shape=(0,), maxshape=(None,), dtype=times.dtype, chunks=(256,)
                 )
-            dataset.resize(end, axis=0)
-            dataset[self.n_frames :] = x
-        self._file["times"].resize((end,))
-        self._file["times"][self.n_frames :] = times
-        self.n_frames = end
-        self._file.attrs["n_frames"] = end
-        self._flush()
+            for name, x in arrays.items():
+                if group[name].shape[1:] != x.shape[1:]:
+                    raise ValueError(
+                        f"states.{name} has per-frame shape {x.shape[1:]}, but the file holds "
+                        f"frames of shape {group[name].shape[1:]}"
+                    )
+            end = self.n_frames + k
+            for name, x in arrays.items():
+                dataset = group[name]
+                dataset.resize(end, axis=0)
+                dataset[self.n_frames :] = x
+            f["times"].resize((end,))
+            f["times"][self.n_frames :] = times
+            self.n_frames = end
+            f.attrs["n_frames"] = end
+            self._write_xdmf(f, now=False)
 
     def set_error(self, message: str) -> None:
         """Record why a run stopped (kept in the ``error`` attribute)."""
-        if self._file is not None:
-            self._file.attrs["error"] = str(message)
-            self._file.flush()
+        if not self._closed:
+            with self._open() as f:
+                f.attrs["error"] = str(message)
 
     def close(self, complete: bool = True) -> None:
-        if self._file is None:
+        if self._closed:
             return
-        self._file.attrs["complete"] = bool(complete and not self._file.attrs["error"])
-        self._flush(xdmf=True)
-        self._file.close()
-        self._file = None
+        with self._open() as f:
+            f.attrs["complete"] = bool(complete and not f.attrs["error"])
+            self._write_xdmf(f)
+        self._closed = True
 
     def __enter__(self) -> TrajectoryWriter:
         return self
 
     def __exit__(self, exc_type, exc, tb) -> None:
-        if exc is not None:
+        if exc is None:
+            self.close()
+            return
+        try:  # record why the run stopped; the run's own exception is the one raised
             self.set_error(f"{exc_type.__name__}: {exc}")
-        self.close(complete=exc is None)
+            self.close(complete=False)
+        except (OSError, ValueError):
+            self._closed = True
 
 
 def write_trajectory(path, trajectory: Trajectory, case: Case | None = None, **kwargs) -> Path:
@@ -286,9 +447,13 @@ def _open(path):
     if not path.is_file():
         raise FileNotFoundError(f"no trajectory file at '{path}'")
     try:
-        f = h5py.File(path, "r")
+        f = _open_for_reading(path)
+    except (OSError, KeyError, RuntimeError) as err:
+        raise ValueError(f"'{path}' is not a readable HDF5 file: {err}") from None
+    try:
         format_ = _decode(f.attrs.get("format"))
     except (OSError, KeyError, RuntimeError) as err:
+        f.close()
         raise ValueError(f"'{path}' is not a readable HDF5 file: {err}") from None
     if format_ != FORMAT:
         f.close()
@@ -357,6 +522,8 @@ def read_trajectory(path, frames=None) -> tuple[Trajectory, dict[str, Any]]:
 
 
 __all__ = [
+    "LOCK_WAIT_S",
+    "FileLockedError",
     "TrajectoryWriter",
     "check_writable",
     "model_to_dict",

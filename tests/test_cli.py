@@ -267,6 +267,18 @@ BAD_INPUT = [
     ),  # fmt: skip
     ([*RUN, "--out", "x.h5"], "--out: 'x.h5' exists; pass --overwrite", _existing("x.h5")),
     ([*RUN, "--out", "x.h5"], "--out: 'x.xdmf' exists; pass --overwrite", _existing("x.xdmf")),
+    (
+        ["plot", "missing.h5", "--out", "x.png"],
+        "sphjax plot: error: --out: 'x.png' exists; pass --overwrite to replace it, or choose "
+        "another path",
+        _existing("x.png"),
+    ),
+    (
+        ["animate", "missing.h5", "--out", "x.gif"],
+        "sphjax animate: error: --out: 'x.gif' exists; pass --overwrite to replace it, or "
+        "choose another path",
+        _existing("x.gif"),
+    ),
     (["plot", "missing.h5", "--out", "x.png"], "FILE.h5: no trajectory file", None),
     (["plot", "bad.h5", "--out", "x.png"], "FILE.h5: 'bad.h5' is not a readable HDF5", _not_hdf5),
     (["plot", "bad.h5", "--out", "p.xyz"], "--out: 'p.xyz' has an unknown extension", None),
@@ -424,6 +436,10 @@ def test_overwrite(tiny_run, tmp_path):
     out.write_text("old")
     assert main(["run", *TINY, "--out", str(out), "--overwrite"]) == 0
     assert len(read_trajectory(out)[0]) == 5
+    png = tmp_path / "o.png"
+    png.write_text("old")
+    assert main(["plot", str(tiny_run[1]), "--out", str(png), "--overwrite"]) == 0
+    assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
 
 
 def test_unwritable_out_is_caught_before_the_case_is_built(tmp_path, capsys, monkeypatch):

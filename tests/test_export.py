@@ -80,7 +80,7 @@ def test_xdmf_follows_the_frames_written_so_far(tmp_path):
     one = jax.tree_util.tree_map(lambda x: np.asarray(x)[None], case.state)
     xdmf = tmp_path / "t.xdmf"
     xdmf.write_text("stale")
-    writer = TrajectoryWriter(tmp_path / "t.h5", case)
+    writer = TrajectoryWriter(tmp_path / "t.h5", case, overwrite=True)  # a stale description
     # the description is rewritten at a pace set by its own cost (XDMF_PACE times the last
     # rewrite's time); a busy machine could stretch that past any sleep, so pace it at zero
     writer.XDMF_PACE = 0.0
