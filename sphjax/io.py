@@ -483,7 +483,11 @@ def _metadata(f) -> dict[str, Any]:
 
 
 def read_trajectory(path, frames=None) -> tuple[Trajectory, dict[str, Any]]:
-    """Read a trajectory file written by :class:`TrajectoryWriter`.
+    """Read a trajectory file written by :class:`TrajectoryWriter`, also while a run is
+    still writing it (the frames written so far; ``complete`` is false).
+
+    Raises :class:`FileLockedError` (a ValueError) if another program holds the file open
+    for writing for longer than :data:`LOCK_WAIT_S`.
 
     Args:
       path: the ``.h5`` file.
