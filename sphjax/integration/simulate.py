@@ -62,6 +62,11 @@ class NeighborOverflowError(RuntimeError):
     """The neighbour list ran out of room where it cannot be re-allocated."""
 
 
+class NeighborOverflowWarning(UserWarning):
+    """A concrete run's neighbour list overflowed and was re-allocated (the chunk is
+    repeated with wider lists, a new compilation); the results are unaffected."""
+
+
 #: room above the largest neighbour count in the lists of a concrete (chunked) run, which
 #: re-allocates on overflow; traced runs (grad, jit) cannot and keep
 #: ``Model.neighbor_capacity``
@@ -505,6 +510,7 @@ def _run_chunk_growing(carry, dt, params, model, save_every, n_frames, start, ex
         warnings.warn(
             f"neighbour list overflowed at step {int(step) + 1}; re-allocated "
             f"({_growth(old, list_sizes(neighbors), model)}) and went on from step {int(step)}",
+            NeighborOverflowWarning,
             stacklevel=4,
         )
 
