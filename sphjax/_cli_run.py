@@ -324,9 +324,10 @@ def _one_line_warnings(bar):
 def run_case(args, out: Path) -> int:
     import warnings
 
+    import jax
     from tqdm import tqdm
 
-    from sphjax._compile import CompileTimer
+    from sphjax._compile import CompileTimer, remember_rate, remembered_rate
     from sphjax.integration.simulate import NeighborOverflowError, SimulationError, simulate
     from sphjax.io import TrajectoryWriter
 
@@ -360,6 +361,15 @@ def run_case(args, out: Path) -> int:
         writer = TrajectoryWriter(out, case, dt=p.dt, attrs=attrs, argument="--out")
     except (ValueError, OSError) as err:
         raise UsageError(None, str(err)) from None
+    rate_key = f"{case.name} {jax.default_backend()}{' float64' if args.float64 else ''}"
+    known = remembered_rate(rate_key)
+    if known and case.n_particles * p.n_steps / known > LONG_RUN_SECONDS:
+        print(
+            f"estimated wall time: about {_duration(case.n_particles * p.n_steps / known)} "
+            f"(at the {known:.3g} particle-steps/s a previous {case.name} run measured here, "
+            "after compilation); Ctrl-C stops the run and keeps the frames written",
+            file=sys.stderr,
+        )
     bar = tqdm(total=p.n_steps, unit="step", disable=args.quiet, file=sys.stderr)
     start = time.perf_counter()
     first_chunk = []  # (time, steps) at the end of the first chunk
@@ -369,7 +379,7 @@ def run_case(args, out: Path) -> int:
         if not first_chunk:
             first_chunk.append((now, n))
             running = now - start - timer.seconds(start, now)
-            if n < p.n_steps and running > 0:
+            if n < p.n_steps and running > 0 and not known:
                 left = (p.n_steps - n) / n * running
                 if now - start + left > LONG_RUN_SECONDS:
                     bar.write(
@@ -411,6 +421,8 @@ def run_case(args, out: Path) -> int:
     wall, compiling = end - start, timer.seconds(start, end)
     running = wall - compiling
     rate = f"{case.n_particles * p.n_steps / running:.3g}" if running > 0 else "?"
+    if running > 0.5:  # long enough to time; remembered for the next estimate
+        remember_rate(rate_key, case.n_particles * p.n_steps / running)
     lines = [
         f"done: {case.n_particles} particles, {p.n_steps} steps, {wall:.2f} s wall "
         f"({compiling:.2f} s compiling), {rate} particle-steps/s after compilation",

@@ -122,3 +122,46 @@ class CompileTimer:
                 total += end - start
                 reach = end
         return total
+
+
+# ---------------------------------------------------------------------------- speeds
+
+
+def rates_file(environ=os.environ) -> Path | None:
+    """Where runs remember their speed (``rates.json`` in the sphjax cache folder), or
+    ``None`` when the cache is off or is JAX's own folder."""
+    folder, source = cache_dir_setting(environ)
+    if folder is None or source == "JAX_COMPILATION_CACHE_DIR":
+        return None
+    return folder / "rates.json"
+
+
+def remembered_rate(key: str, environ=os.environ) -> float | None:
+    """The particle-steps per second (after compilation) a previous run of ``key``
+    measured on this machine, or ``None``."""
+    import json
+
+    path = rates_file(environ)
+    try:
+        rate = json.loads(path.read_text()).get(key) if path is not None else None
+    except (OSError, ValueError, AttributeError):
+        return None
+    return float(rate) if isinstance(rate, int | float) and rate > 0 else None
+
+
+def remember_rate(key: str, rate: float, environ=os.environ) -> None:
+    """Keep ``rate`` for ``key`` (best effort: a folder that cannot be written is skipped)."""
+    import json
+
+    path = rates_file(environ)
+    if path is None or not rate > 0:
+        return
+    try:
+        rates = json.loads(path.read_text()) if path.exists() else {}
+        if not isinstance(rates, dict):
+            rates = {}
+        rates[key] = float(f"{rate:.3g}")
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_text(json.dumps(rates, indent=1, sort_keys=True))
+    except (OSError, ValueError):
+        pass

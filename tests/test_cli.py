@@ -579,6 +579,30 @@ def test_neighbour_overflow_is_one_line(tmp_path, capsys, monkeypatch):
     assert ".py:" not in err and "Warning" not in err
 
 
+def test_long_run_prints_its_estimate_after_the_first_chunk(tmp_path, capsys, monkeypatch):
+    monkeypatch.setattr(sphjax._cli_run, "CHUNK_STEPS", 2)  # two chunks of 2 steps
+    monkeypatch.setattr(sphjax._cli_run, "LONG_RUN_SECONDS", 0.0)  # every run is "long"
+    assert main(["run", *TINY, "--save-every", "1", "--out", str(tmp_path / "e.h5")]) == 0
+    err = capsys.readouterr().err
+    assert "estimated wall time: about " in err
+    assert "particle-steps/s after compilation on the first 2 steps); Ctrl-C stops" in err
+
+
+def test_long_run_prints_its_estimate_before_it_starts(tmp_path, capsys, monkeypatch):
+    import sphjax._compile
+
+    rates = tmp_path / "rates.json"
+    monkeypatch.setattr(sphjax._compile, "rates_file", lambda environ=None: rates)
+    sphjax._compile.remember_rate(f"taylor_green {jax.default_backend()}", 1.0)
+    monkeypatch.setattr(sphjax._cli_run, "LONG_RUN_SECONDS", 60.0)
+    assert main(["run", *TINY, "--out", str(tmp_path / "e.h5")]) == 0
+    err = capsys.readouterr().err.splitlines()
+    assert err[1].startswith(  # before the run: 64 particles x 4 steps at 1 per second
+        "estimated wall time: about 4 min (at the 1 particle-steps/s a previous taylor_green "
+        "run measured here, after compilation); Ctrl-C stops"
+    )
+
+
 # ---------------------------------------------------------------------------- compilation
 
 
