@@ -9,6 +9,7 @@ import dataclasses
 import difflib
 import inspect
 import math
+import re
 import sys
 import time
 from pathlib import Path
@@ -17,32 +18,62 @@ import jax.numpy as jnp
 import numpy as np
 
 from sphjax import cases
+from sphjax._text import show
 from sphjax.cli import CHUNK_STEPS, DEFAULT_FRAMES, EXIT_OK, EXIT_UNSTABLE, UsageError
 from sphjax.integration.timestep import check_time_step, stable_time_step
 
 # ---------------------------------------------------------------------------- the case
 
 
-def _check_case_value(name: str, key: str, value, default):
-    """A --case-arg value of the type of the argument's default (numbers, flags, names)."""
-    what = None
-    if isinstance(default, bool):
-        if not isinstance(value, bool):
-            what = "True or False"
-    elif isinstance(default, int | float):
-        if isinstance(value, bool) or not isinstance(value, int | float):
-            what = "a number"
-        elif isinstance(default, int) and isinstance(value, float) and value.is_integer():
+_KINDS = {
+    "bool": "True or False",
+    "int": "a whole number",
+    "float": "a number",
+    "str": "a name",
+    "None": "None",
+}
+
+
+def _accepted_kinds(parameter) -> list[str]:
+    """The types a case argument takes, from its annotation (or else its default)."""
+    annotation = parameter.annotation
+    if isinstance(annotation, str):  # ``from __future__ import annotations``
+        kinds = [k.strip() for k in annotation.split("|")]
+        if all(k in _KINDS for k in kinds):
+            return kinds
+    default = parameter.default
+    if default is None:
+        return []  # anything: the case checks it
+    return [type(default).__name__] if type(default).__name__ in _KINDS else []
+
+
+def _check_case_value(name: str, key: str, value, parameter):
+    """A --case-arg value of a type the case argument takes (numbers, flags, names)."""
+    kinds = _accepted_kinds(parameter)
+    if not kinds:
+        return value
+    if value is None and "None" in kinds:
+        return value
+    if isinstance(value, bool):
+        if "bool" in kinds:
+            return value
+    elif isinstance(value, int | float) and ("int" in kinds or "float" in kinds):
+        if not math.isfinite(value):
+            raise UsageError(
+                f"--case-arg {key}", f"{key}={show(value)}: case {name!r} expects a finite number"
+            )
+        if "float" not in kinds and isinstance(value, float) and value.is_integer():
             value = int(value)
-        elif not math.isfinite(value):
-            what = "a finite number"
-    elif isinstance(default, str) and not isinstance(value, str):
-        value = str(value)
-    if what is not None:
-        raise UsageError(
-            "--case-arg", f"{key}={value!r}: case {name!r} expects {what} (default {default!r})"
-        )
-    return value
+        return value
+    elif isinstance(value, str) and "str" in kinds:
+        return value
+    if kinds == ["str"] and not isinstance(value, bool):  # a name that parsed as a literal
+        return str(value)
+    what = " or ".join(_KINDS[k] for k in kinds)
+    raise UsageError(
+        "--case-arg",
+        f"{key}={show(value)}: case {name!r} expects {what} (default {show(parameter.default)})",
+    )
 
 
 def build_case(name: str, case_args: dict, *, n=None, dx=None, t_end=None):
@@ -65,7 +96,7 @@ def build_case(name: str, case_args: dict, *, n=None, dx=None, t_end=None):
                  "t_end": "--t-end" if t_end is not None else None}.get(key)  # fmt: skip
         if given:
             raise UsageError("--case-arg", f"{key} is also given by {given}; give it once")
-        kwargs[key] = _check_case_value(name, key, value, accepted[key].default)
+        kwargs[key] = _check_case_value(name, key, value, accepted[key])
     if n is not None:
         kwargs["n"] = n
     if t_end is not None and "t_end" in accepted:
@@ -74,9 +105,10 @@ def build_case(name: str, case_args: dict, *, n=None, dx=None, t_end=None):
         case = cases.get(name, dx=dx, **kwargs)
     except (ValueError, TypeError) as err:
         message = str(err)
-        named = [k for k in case_args if message.startswith(k) or f" {k} " in message]
+        named = [k for k in case_args if re.search(rf"(?<![\w-]){re.escape(k)}(?![\w-])", message)]
         argument = (
-            "--case-arg" if named
+            f"--case-arg {named[0]}" if len(named) == 1
+            else "--case-arg" if named
             else "--dx" if dx is not None
             else "--n" if n is not None
             else "--case-arg" if case_args
@@ -200,6 +232,7 @@ class Plan:
 def plan(case, *, dt=None, t_end=None, save_every=None, save_dt=None) -> Plan:
     """Time step, number of steps and save interval, checked before anything runs."""
     note = ""
+    given_t_end = t_end is not None
     if dt is not None:
         try:
             check_time_step(dt, case.state, case.model, case.params)
@@ -223,6 +256,13 @@ def plan(case, *, dt=None, t_end=None, save_every=None, save_dt=None) -> Plan:
             step = save_dt / k
         save_every = max(1, round(save_dt / step))
     t_end = case.t_end if t_end is None else t_end
+    if save_dt is not None and save_dt > t_end * (1 + 1e-9):
+        whose = "--t-end" if given_t_end else "the case's end time"
+        raise UsageError(
+            "--save-dt",
+            f"{save_dt:g} s is longer than the run ({whose} {t_end:g} s), so no frame would "
+            f"fall inside it; use e.g. --save-dt {t_end / 10:.3g}, or a longer --t-end",
+        )
     n_steps = max(1, math.ceil(t_end / step - 1e-9))  # the rule of sphjax.simulate
     if save_every is None:
         save_every = default_save_every(n_steps)
@@ -232,9 +272,62 @@ def plan(case, *, dt=None, t_end=None, save_every=None, save_dt=None) -> Plan:
 # ---------------------------------------------------------------------------- run
 
 
+#: a run whose estimated wall time exceeds this says so before it goes on
+LONG_RUN_SECONDS = 600.0
+
+
+def _duration(seconds: float) -> str:
+    if seconds < 120:
+        return f"{seconds:.0f} s"
+    if seconds < 7200:
+        return f"{seconds / 60:.0f} min"
+    return f"{seconds / 3600:.1f} h"
+
+
+def _candidates(args, base) -> str:
+    """What the command changed from the case's defaults, as causes of an instability."""
+    changed = []
+    for name, value in args.set:
+        old = np.asarray(getattr(base.params, name))
+        was = ",".join(f"{v:g}" for v in old.ravel()) if old.ndim else f"{float(old):g}"
+        now = ",".join(f"{v:g}" for v in value) if isinstance(value, tuple) else f"{value:g}"
+        changed.append(f"--set {name}={now} (the case's value: {was})")
+    changed += [f"--case-arg {key}={show(value)}" for key, value in args.case_arg]
+    if args.dt is not None:
+        changed.append(f"--dt {args.dt:g} (the case's stable step: {base.dt:.4g})")
+    if not changed:
+        return "Try a smaller --dt."
+    return (
+        "Changed from the case's defaults, and candidates for the cause: "
+        + "; ".join(changed)
+        + ". Undo them one at a time, or try a smaller --dt."
+    )
+
+
+def _one_line_warnings(bar):
+    """Show a neighbour-list re-allocation as one line above the progress bar."""
+    import warnings
+
+    from sphjax.integration.simulate import NeighborOverflowWarning
+
+    show_default = warnings.showwarning
+
+    def show_warning(message, category, filename, lineno, file=None, line=None):
+        if issubclass(category, NeighborOverflowWarning):
+            bar.write(f"note: {message} (one more compilation)", file=sys.stderr)
+        else:
+            show_default(message, category, filename, lineno, file, line)
+
+    return show_warning
+
+
 def run_case(args, out: Path) -> int:
+    import warnings
+
+    import jax
     from tqdm import tqdm
 
+    from sphjax._compile import CompileTimer, remember_rate, remembered_rate
     from sphjax.integration.simulate import NeighborOverflowError, SimulationError, simulate
     from sphjax.io import TrajectoryWriter
 
@@ -247,6 +340,7 @@ def run_case(args, out: Path) -> int:
         # case's own step it is shortened to fit save_dt or a stiffer --set, never lengthened
     else:
         case = build_case(args.case, dict(args.case_arg), n=args.n, dx=args.dx, t_end=args.t_end)
+    base = case
     case = apply_sets(case, args.set)
     p = plan(case, dt=dt, t_end=args.t_end, save_every=save_every, save_dt=save_dt)
     full = p.n_steps // p.save_every
@@ -269,16 +363,38 @@ def run_case(args, out: Path) -> int:
         )
     except (ValueError, OSError) as err:
         raise UsageError(None, str(err)) from None
+    rate_key = f"{case.name} {jax.default_backend()}{' float64' if args.float64 else ''}"
+    known = remembered_rate(rate_key)
+    if known and case.n_particles * p.n_steps / known > LONG_RUN_SECONDS:
+        print(
+            f"estimated wall time: about {_duration(case.n_particles * p.n_steps / known)} "
+            f"(at the {known:.3g} particle-steps/s a previous {case.name} run measured here, "
+            "after compilation); Ctrl-C stops the run and keeps the frames written",
+            file=sys.stderr,
+        )
     bar = tqdm(total=p.n_steps, unit="step", disable=args.quiet, file=sys.stderr)
     start = time.perf_counter()
-    first_chunk_end = []
+    first_chunk = []  # (time, steps) at the end of the first chunk
 
     def progress(n):
-        if not first_chunk_end:
-            first_chunk_end.append((time.perf_counter(), n))
+        now = time.perf_counter()
+        if not first_chunk:
+            first_chunk.append((now, n))
+            running = now - start - timer.seconds(start, now)
+            if n < p.n_steps and running > 0 and not known:
+                left = (p.n_steps - n) / n * running
+                if now - start + left > LONG_RUN_SECONDS:
+                    bar.write(
+                        f"estimated wall time: about {_duration(now - start + left)} "
+                        f"({case.n_particles * n / running:.3g} particle-steps/s after "
+                        f"compilation on the first {n} steps); Ctrl-C stops the run and keeps "
+                        "the frames written",
+                        file=sys.stderr,
+                    )
         bar.update(n)
 
-    with writer:
+    with writer, CompileTimer() as timer, warnings.catch_warnings():
+        warnings.showwarning = _one_line_warnings(bar)
         try:
             simulate(
                 case, dt=p.dt, n_steps=p.n_steps, save_every=p.save_every, on_frames=writer,
@@ -290,7 +406,7 @@ def run_case(args, out: Path) -> int:
             print(
                 f"sphjax run: error: {err}\nstopped at step {err.step}, particle "
                 f"{err.particle}; the {writer.n_frames} frames before it are in {out}. "
-                "Try a smaller --dt.",
+                f"{_candidates(args, base)}",
                 file=sys.stderr,
             )
             return EXIT_UNSTABLE
@@ -303,16 +419,16 @@ def run_case(args, out: Path) -> int:
             )
             return EXIT_UNSTABLE
     bar.close()
-    wall = time.perf_counter() - start
-    rate = case.n_particles * p.n_steps / wall
+    end = time.perf_counter()
+    wall, compiling = end - start, timer.seconds(start, end)
+    running = wall - compiling
+    rate = f"{case.n_particles * p.n_steps / running:.3g}" if running > 0 else "?"
+    if running > 0.5:  # long enough to time; remembered for the next estimate
+        remember_rate(rate_key, case.n_particles * p.n_steps / running)
     lines = [
-        f"done: {case.n_particles} particles, {p.n_steps} steps, {wall:.2f} s wall, "
-        f"{rate:.3g} particle-steps/s",
+        f"done: {case.n_particles} particles, {p.n_steps} steps, {wall:.2f} s wall "
+        f"({compiling:.2f} s compiling), {rate} particle-steps/s after compilation",
+        f"      {writer.n_frames} frames in {out} (ParaView: open {writer.xdmf})",
     ]
-    if first_chunk_end and first_chunk_end[0][1] < p.n_steps:
-        t1, n1 = first_chunk_end[0]
-        steady = case.n_particles * (p.n_steps - n1) / (time.perf_counter() - t1)
-        lines.append(f"      {steady:.3g} particle-steps/s after the first chunk (compilation)")
-    lines.append(f"      {writer.n_frames} frames in {out} (ParaView: open {writer.xdmf})")
     print("\n".join(lines))
     return EXIT_OK

@@ -38,6 +38,15 @@ def check_writable(path, argument: str = "path") -> Path:
             f"{argument}: cannot overwrite '{path}': the file is read-only; "
             "remove it, change its permissions or choose another path"
         )
+    if not path.exists():  # permissions can say yes where the file system says no (/proc)
+        try:
+            os.close(os.open(path, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o644))
+        except OSError as err:
+            raise ValueError(
+                f"{argument}: cannot write '{path}': files cannot be created in the folder "
+                f"'{parent}' ({err.strerror}); choose a path in a folder you can write to"
+            ) from None
+        os.unlink(path)
     return path
 
 

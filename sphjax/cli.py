@@ -8,7 +8,8 @@
     sphjax dataset taylor_green --out data --steps 40 --write-every 4
 
 Exit codes: 0 success; 1 the simulation went unstable (the frames written before the
-failure stay in the output file); 2 bad input: one line naming the argument and the fix.
+failure stay in the output file); 2 bad input: one line naming the argument and the fix;
+141 the reader of the output went away (``sphjax cases | head``), quietly.
 
 This module imports only the standard library at the top: JAX and the solver are imported
 by the commands that run something, so ``--help``, ``--version`` and a mistyped command
@@ -26,6 +27,7 @@ import sys
 from pathlib import Path
 
 EXIT_OK, EXIT_UNSTABLE, EXIT_USAGE = 0, 1, 2
+EXIT_BROKEN_PIPE = 141  # 128 + SIGPIPE, as a Unix tool whose reader has gone
 DEFAULT_FRAMES = 100
 CHUNK_STEPS = 500  # steps per compiled chunk: the progress bar moves once per chunk
 
@@ -122,6 +124,10 @@ def _case_arg(text: str):
     try:
         return key, ast.literal_eval(value)
     except (ValueError, SyntaxError):
+        pass
+    try:
+        return key, float(value)  # inf, nan: refused by the case argument's check
+    except ValueError:
         return key, value  # a plain string, e.g. kernel=wendland_c2
 
 
@@ -164,6 +170,7 @@ def _parser() -> argparse.ArgumentParser:
     )
     parser.add_argument("--version", action="version", version=f"sphjax {_version()}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
+    parser.commands = sub.choices  # name -> sub-parser, for "did you mean" on options
     _add_run(sub)
     _add_plot(sub)
     _add_animate(sub)
@@ -454,6 +461,22 @@ def _summary(factory) -> str:
     return doc
 
 
+def _argument_doc(factory, name: str) -> str:
+    """The first sentence of argument ``name``'s entry in a case's docstring."""
+    lines = (factory.__doc__ or "").splitlines()
+    for i, line in enumerate(lines):
+        if line.strip().startswith(f"{name}:"):
+            indent = len(line) - len(line.lstrip())
+            text = [line.strip()[len(name) + 1 :]]
+            for more in lines[i + 1 :]:
+                if not more.strip() or len(more) - len(more.lstrip()) <= indent:
+                    break
+                text.append(more.strip())
+            doc = " ".join(" ".join(text).split()).replace("``", "")
+            return doc[: doc.index(". ") + 1] if ". " in doc else doc
+    return ""
+
+
 def cmd_cases(args) -> int:
     from sphjax.cases import CASES
 
@@ -471,6 +494,12 @@ def cmd_cases(args) -> int:
     case = build_case(args.name, {})
     factory = CASES[args.name]
     print(f"{args.name}: {_summary(factory)}")
+    counts = _argument_doc(factory, "n")
+    if counts:
+        print(
+            f"--n counts {counts.rstrip('.')}; default n = {case.info.get('n', '?')}: dx = "
+            f"{case.info.get('dx', float('nan')):.4g}, {case.n_particles} particles"
+        )
     print("case arguments (--case-arg KEY=VALUE):")
     for key, parameter in inspect.signature(factory).parameters.items():
         print(f"  {key} = {parameter.default!r}")
@@ -485,6 +514,15 @@ def cmd_cases(args) -> int:
 # ---------------------------------------------------------------------------- run
 
 
+def _compilation_cache() -> None:
+    """JAX's persistent compilation cache on (sphjax._compile), before anything compiles."""
+    from sphjax._compile import enable_compilation_cache
+
+    _, note = enable_compilation_cache()
+    if note:
+        print(note, file=sys.stderr)
+
+
 def cmd_run(args) -> int:
     from sphjax._paths import exists_message
     from sphjax.xdmf import xdmf_path
@@ -492,6 +530,7 @@ def cmd_run(args) -> int:
     out = _output_file(args.out, "--out", args.overwrite, {".h5", ".hdf5"})
     if xdmf_path(out).exists() and not args.overwrite:  # the run writes its description too
         raise UsageError("--out", exists_message(xdmf_path(out), "--out"))
+    _compilation_cache()
     if args.float64:
         import jax
 
@@ -541,6 +580,17 @@ def cmd_animate(args) -> int:
 
     out = _output_file(args.out, "--out", args.overwrite, MOVIE_SUFFIXES)
     meta = _trajectory_metadata(args.file)
+    n = meta["n_frames"]
+    if n < 2:
+        raise UsageError(
+            "FILE.h5", f"'{args.file}' holds one frame; an animation needs two or more "
+            "(draw the frame with 'sphjax plot', or save more frames with 'sphjax run')"
+        )  # fmt: skip
+    if len(range(0, n, args.every)) < 2:
+        raise UsageError(
+            "--every", f"{args.every} leaves 1 of the {n} saved frames; an animation needs two "
+            f"or more: use --every {n - 1} or less"
+        )  # fmt: skip
     plane = _slice_plane(args)
     trajectory, _ = _read_frames(args.file, frames=slice(0, meta["n_frames"], args.every))
     try:
@@ -612,6 +662,7 @@ def cmd_dataset(args) -> int:
             f"{args.write_every} must divide --steps {args.steps} and give at least 3 frames "
             f"(--steps >= 2 x --write-every); e.g. --steps {max(n, 2 * args.write_every)}",
         )
+    _compilation_cache()
     from sphjax._cli_run import build_case
 
     case = build_case(args.case, dict(args.case_arg))
@@ -689,6 +740,21 @@ def _unknown_command(argv: list[str]) -> str | None:
     return f"sphjax: error: unknown command {first!r}; {hint}choose one of {', '.join(COMMANDS)}"
 
 
+def _unknown_options(parser, command: str, unknown: list[str]) -> str:
+    """One line for arguments the command does not take, with the closest options."""
+    sub = parser.commands[command]
+    options = [o for action in sub._actions for o in action.option_strings if o.startswith("--")]
+    first = unknown[0]
+    if first.startswith("-"):
+        flag = first.split("=", 1)[0]
+        close = difflib.get_close_matches(flag, options, n=1, cutoff=0.6)
+        hint = f"did you mean {close[0]}? " if close else ""
+        what = f"unknown option {flag}; {hint}"
+    else:
+        what = f"unexpected argument {first!r}; "
+    return f"sphjax {command}: error: {what}see 'sphjax {command} --help'"
+
+
 def main(argv: list[str] | None = None) -> int:
     """Entry point of the ``sphjax`` command; returns the exit code."""
     argv = list(sys.argv[1:] if argv is None else argv)
@@ -696,19 +762,29 @@ def main(argv: list[str] | None = None) -> int:
     if message:
         print(message, file=sys.stderr)
         return EXIT_USAGE
+    parser = _parser()
     try:
-        args = _parser().parse_args(argv)
+        args, unknown = parser.parse_known_args(argv)
     except SystemExit as exit_:  # argparse has printed its message (or --help, --version)
         return exit_.code if isinstance(exit_.code, int) else EXIT_USAGE
+    if unknown:
+        print(_unknown_options(parser, args.command, unknown), file=sys.stderr)
+        return EXIT_USAGE
     args.argv = argv
     try:
-        return COMMANDS[args.command](args)
+        code = COMMANDS[args.command](args)
+        sys.stdout.flush()  # here, so that a closed pipe is caught below
+        return code
     except UsageError as err:
         print(f"sphjax {args.command}: error: {err}", file=sys.stderr)
         return EXIT_USAGE
     except KeyboardInterrupt:
         print(f"sphjax {args.command}: interrupted", file=sys.stderr)
         return 130
+    except BrokenPipeError:  # `sphjax cases | head`: the reader has all it wanted
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())  # so the flush at exit finds no closed pipe
+        return EXIT_BROKEN_PIPE
 
 
 if __name__ == "__main__":

@@ -7,6 +7,7 @@ import os
 import subprocess
 import sys
 import time
+from pathlib import Path
 
 import h5py
 import jax
@@ -55,6 +56,15 @@ def test_cases_describes_one_case(capsys):
     # velocity): the others would be refused
     assert "artificial_alpha = " in out and "density_diffusion = " in out
     assert "kinematic_viscosity" not in out and "transport_pressure" not in out
+    # what --n counts, and what the default gives
+    assert "--n counts particles across the column width (dx = L / n); default n = 20" in out
+
+
+@pytest.mark.parametrize("name", sorted(sphjax.cases.CASES))
+def test_every_case_says_what_n_counts(name):
+    from sphjax.cli import _argument_doc
+
+    assert _argument_doc(sphjax.cases.CASES[name], "n").startswith("particles ")
 
 
 @pytest.mark.parametrize("name", ["taylor_green", "oscillating_plate", "hydrostatic_fsi_plate"])
@@ -83,7 +93,8 @@ def test_run_writes_frames_and_prints_a_summary(tiny_run, capsys):
 def test_summary(tmp_path, capsys):
     assert main(["run", *TINY, "--out", str(tmp_path / "s.h5")]) == 0
     out = capsys.readouterr().out
-    assert "64 particles, 4 steps" in out and "particle-steps/s" in out and " s wall" in out
+    assert "64 particles, 4 steps" in out and " s wall" in out
+    assert " s compiling), " in out and "particle-steps/s after compilation" in out
 
 
 def test_dx_maps_onto_resolution(tmp_path):
@@ -253,8 +264,50 @@ BAD_INPUT = [
         None,
     ),  # fmt: skip
     ([*RUN, "--case-arg", "n=8"], "--case-arg: n is also given by --n; give it once", None),
-    ([*RUN, "--case-arg", "disorder=-3"], "--case-arg: ", None),
+    ([*RUN, "--case-arg", "disorder=-3"], "--case-arg disorder: disorder must lie in", None),
+    (
+        ["run", "oscillating_plate", "--n", "4", "--case-arg", "poisson_ratio=0.7", "--quiet"],
+        "--case-arg poisson_ratio: Params.poisson_ratio must be a number in (-1, 0.5), got 0.7",
+        None,
+    ),
+    (
+        ["run", "taylor_green", "--n", "8", "--case-arg", "t_end=-1", "--quiet"],
+        "--case-arg t_end: t_end must be a positive number (the end time in s), got -1",
+        None,
+    ),
+    ([*RUN, "--case-arg", "reynolds=inf"], "reynolds=inf: case 'taylor_green' expects a", None),
+    (
+        ["run", "dam_break", "--case-arg", "density_diffusion=5"],
+        "--case-arg: density_diffusion=5: case 'dam_break' expects a name or None",
+        None,
+    ),
+    (
+        ["run", "hydrostatic_fsi_plate", "--case-arg", "substeps=fast"],
+        "--case-arg substeps: substeps must be a positive integer or 'auto'",
+        None,
+    ),
+    (
+        ["run", "taylor_green", "--n", "8", "--save-dt", "1.0", "--t-end", "0.01", "--quiet"],
+        "--save-dt: 1 s is longer than the run (--t-end 0.01 s), so no frame would fall",
+        None,
+    ),
+    (
+        ["run", "taylor_green", "--tend", "0.01"],
+        "run: error: unknown option --tend; did you mean --t-end? see 'sphjax run --help'",
+        None,
+    ),  # fmt: skip
+    (["run", "taylor_green", "--t-end=0.1", "x"], "unexpected argument 'x'", None),
+    (
+        ["plot", "a.h5", "--frmae", "1", "--out", "x.png"],
+        "unknown option --frmae; did you mean --frame?",
+        None,
+    ),
     ([*RUN, "--out", "/no/such/dir/x.h5"], "--out: cannot write", None),
+    (
+        [*RUN, "--out", "/proc/x.h5"],
+        "--out: cannot write '/proc/x.h5': files cannot be created in the folder '/proc'",
+        None,
+    ),
     (
         [*RUN, "--out", "f/x.h5"],
         "--out: cannot write 'f/x.h5': 'f' is not a directory",
@@ -431,6 +484,50 @@ def test_damaged_file_is_bad_input(tiny_run, tmp_path, capsys, how, command):
     assert len(err.strip().splitlines()) == 1, err
 
 
+def test_animate_needs_two_frames(tiny_run, tmp_path, capsys):
+    _, out = tiny_run  # 3 frames
+    gif = tmp_path / "m.gif"
+    assert main(["animate", str(out), "--every", "1000", "--out", str(gif), "--quiet"]) == 2
+    err = capsys.readouterr().err
+    assert "--every: 1000 leaves 1 of the 3 saved frames; an animation needs two or more: " \
+        "use --every 2 or less" in err  # fmt: skip
+    assert len(err.strip().splitlines()) == 1 and not gif.exists()
+
+
+def test_case_args_take_what_the_python_api_takes():
+    """Every case argument's default passes the --case-arg check unchanged, and split
+    integration (``substeps="auto"``) and ``None`` reach the cases that accept them."""
+    import inspect
+
+    from sphjax._cli_run import _check_case_value, build_case
+
+    for name, factory in sphjax.cases.CASES.items():
+        for key, parameter in inspect.signature(factory).parameters.items():
+            value = _check_case_value(name, key, parameter.default, parameter)
+            assert value == parameter.default, (name, key)
+            if "str" in str(parameter.annotation).split(" | ") and key == "substeps":
+                assert _check_case_value(name, key, "auto", parameter) == "auto"
+    case = build_case("hydrostatic_fsi_plate", {"substeps": "auto", "t_end": 0.01}, n=2)
+    assert isinstance(case.info["substeps"], int) and case.info["substeps"] > 1
+    case = build_case("dam_break", {"density_diffusion": None}, n=4)
+    assert case.model.systems[0].density_diffusion is None
+
+
+def test_cases_output_into_a_closed_pipe_exits_quietly():
+    code = "import sys; from sphjax.cli import main; sys.exit(main(sys.argv[1:]))"
+    child = subprocess.Popen(
+        [sys.executable, "-c", code, "cases"],
+        env=dict(os.environ, JAX_PLATFORMS="cpu"),
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    child.stdout.close()  # `sphjax cases | head -0`: the reader is gone before the output
+    err = child.stderr.read()
+    assert child.wait() == 141
+    assert err == "", err
+
+
 def test_overwrite(tiny_run, tmp_path):
     out = tmp_path / "o.h5"
     out.write_text("old")
@@ -464,14 +561,92 @@ def test_unstable_run_exits_nonzero_and_keeps_frames(tmp_path, capsys, monkeypat
     case = sphjax.cases.get("dam_break", n=4)
     out = tmp_path / "blowup.h5"
     argv = ["run", "dam_break", "--n", "4", "--dt", str(30 * case.dt), "--t-end",
-            str(40 * 30 * case.dt), "--save-every", "1", "--quiet", "--out", str(out)]  # fmt: skip
+            str(40 * 30 * case.dt), "--save-every", "1", "--quiet", "--out", str(out),
+            "--set", "artificial_alpha=0.05"]  # fmt: skip
     assert main(argv) == 1
     err = capsys.readouterr().err
     assert "unstable at step" in err and "particle" in err and "Traceback" not in err
+    # what the command changed from the case's defaults is named as a candidate cause
+    assert "candidates for the cause: --set artificial_alpha=0.05 (the case's value: 0.1); " \
+        f"--dt {30 * case.dt:g} (the case's stable step: {case.dt:.4g})" in err  # fmt: skip
     trajectory, meta = read_trajectory(out)
     assert 1 <= len(trajectory) < 41
     assert not meta["complete"] and "unstable" in meta["error"]
     assert f"the {len(trajectory)} frames before it are in {out}" in err
+
+
+def test_neighbour_overflow_is_one_line(tmp_path, capsys, monkeypatch):
+    from sphjax.integration.simulate import NeighborOverflowWarning
+
+    simulate = sphjax.integration.simulate.simulate
+
+    def overflowing(*args, **kwargs):
+        import warnings
+
+        message = "neighbour list overflowed at step 3; re-allocated"
+        warnings.warn(message, NeighborOverflowWarning, stacklevel=2)
+        return simulate(*args, **kwargs)
+
+    monkeypatch.setattr(sphjax.integration.simulate, "simulate", overflowing)
+    assert main(["run", *TINY, "--out", str(tmp_path / "o.h5")]) == 0
+    err = capsys.readouterr().err
+    line = "note: neighbour list overflowed at step 3; re-allocated (one more compilation)"
+    assert line in err.splitlines()
+    assert ".py:" not in err and "Warning" not in err
+
+
+def test_long_run_prints_its_estimate_after_the_first_chunk(tmp_path, capsys, monkeypatch):
+    monkeypatch.setattr(sphjax._cli_run, "CHUNK_STEPS", 2)  # two chunks of 2 steps
+    monkeypatch.setattr(sphjax._cli_run, "LONG_RUN_SECONDS", 0.0)  # every run is "long"
+    assert main(["run", *TINY, "--save-every", "1", "--out", str(tmp_path / "e.h5")]) == 0
+    err = capsys.readouterr().err
+    assert "estimated wall time: about " in err
+    assert "particle-steps/s after compilation on the first 2 steps); Ctrl-C stops" in err
+
+
+def test_long_run_prints_its_estimate_before_it_starts(tmp_path, capsys, monkeypatch):
+    import sphjax._compile
+
+    rates = tmp_path / "rates.json"
+    monkeypatch.setattr(sphjax._compile, "rates_file", lambda environ=None: rates)
+    sphjax._compile.remember_rate(f"taylor_green {jax.default_backend()}", 1.0)
+    monkeypatch.setattr(sphjax._cli_run, "LONG_RUN_SECONDS", 60.0)
+    assert main(["run", *TINY, "--out", str(tmp_path / "e.h5")]) == 0
+    err = capsys.readouterr().err.splitlines()
+    assert err[1].startswith(  # before the run: 64 particles x 4 steps at 1 per second
+        "estimated wall time: about 4 min (at the 1 particle-steps/s a previous taylor_green "
+        "run measured here, after compilation); Ctrl-C stops"
+    )
+
+
+# ---------------------------------------------------------------------------- compilation
+
+
+def test_compilation_cache_folder(tmp_path):
+    from sphjax._compile import cache_dir_setting, default_cache_dir
+
+    assert default_cache_dir({"XDG_CACHE_HOME": "/c"}) == Path("/c/sphjax/jax")
+    assert default_cache_dir({}) == Path.home() / ".cache" / "sphjax" / "jax"
+    for off in ("off", "0", "", "none"):
+        assert cache_dir_setting({"SPHJAX_CACHE_DIR": off})[0] is None
+    assert cache_dir_setting({"SPHJAX_CACHE_DIR": str(tmp_path)}) == (tmp_path, "SPHJAX_CACHE_DIR")
+    # tests/conftest.py sets JAX's own folder, which the CLI then leaves alone
+    assert cache_dir_setting({})[1] == "JAX_COMPILATION_CACHE_DIR"
+
+
+def test_second_run_loads_its_programs_from_the_cache(tmp_path):
+    cache = tmp_path / "cache"
+    argv = ["run", *TINY, "--overwrite", "--out", str(tmp_path / "c.h5")]
+    first = cli(*argv, env={"SPHJAX_CACHE_DIR": str(cache)})
+    assert first.returncode == 0, first.stderr
+    assert len(list(cache.iterdir())) > 10  # the chunk program and the small ones
+    second = cli(*argv, env={"SPHJAX_CACHE_DIR": str(cache)})
+    assert second.returncode == 0, second.stderr
+
+    def compiling(result):
+        return float(result.stdout.split(" s wall (")[1].split(" s compiling")[0])
+
+    assert compiling(second) < compiling(first)
 
 
 # ---------------------------------------------------------------------------- entry point

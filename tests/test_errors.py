@@ -65,6 +65,21 @@ def test_spacing_maps_onto_resolution():
         sphjax.cases.get("taylor_green", n=8, dx=0.1)
 
 
+@pytest.mark.parametrize("t_end", [-1.0, 0.0, float("nan")])
+def test_non_positive_end_time(t_end):
+    with pytest.raises(ValueError, match="^t_end must be a positive number"):
+        sphjax.cases.get("taylor_green", n=8, relax_iterations=0, t_end=t_end)
+
+
+def test_messages_show_plain_numbers(tg):
+    with pytest.raises(ValueError, match=r"got 0\.7$"):
+        sphjax.cases.get("oscillating_plate", n=4).params.replace(
+            poisson_ratio=jnp.asarray(0.7, jnp.float32)
+        )
+    with pytest.raises(ValueError, match=r"got 0\.0$"):
+        tg.params.replace(sound_speed=np.float64(0.0))
+
+
 @pytest.mark.parametrize("argument", ["width", "viscosity", "body_force"])
 def test_non_positive_physical_argument(argument):
     with pytest.raises(ValueError, match=f"^{argument} must be a positive number"):
@@ -86,8 +101,10 @@ def test_non_positive_time_step(tg, dt):
 
 
 def test_bad_step_counts(tg):
-    with pytest.raises(ValueError, match="t_end must be positive"):
+    with pytest.raises(ValueError, match="t_end must be a positive number, got -1.0"):
         sphjax.simulate(tg, t_end=-1.0)
+    with pytest.raises(ValueError, match="give n_steps or t_end, not both"):
+        sphjax.simulate(tg, n_steps=2, t_end=0.1)
     with pytest.raises(ValueError, match="n_steps must be a positive integer"):
         sphjax.simulate(tg, n_steps=0)
     with pytest.raises(ValueError, match="save_every must be a positive integer"):

@@ -6,6 +6,8 @@ import math
 
 import numpy as np
 
+from sphjax._text import show
+
 
 def lattice(lower, upper, dx) -> np.ndarray:
     """Cell-centred square/cubic lattice filling the box ``[lower, upper]`` with spacing dx.
@@ -49,9 +51,9 @@ def check_positive(name: str, value) -> float:
     try:
         number = float(value)
     except (TypeError, ValueError):
-        raise ValueError(f"{name} must be a positive number, got {value!r}") from None
+        raise ValueError(f"{name} must be a positive number, got {show(value)}") from None
     if not number > 0 or not math.isfinite(number):
-        raise ValueError(f"{name} must be a positive number, got {value!r}")
+        raise ValueError(f"{name} must be a positive number, got {show(value)}")
     return number
 
 
@@ -63,6 +65,6 @@ def check_resolution(name: str, value, minimum: int = 2) -> int:
         ok = False
     if not ok:
         raise ValueError(
-            f"{name} must be an integer >= {minimum} (particles across the case), got {value!r}"
+            f"{name} must be an integer >= {minimum} (particles across the case), got {show(value)}"
         )
     return int(value)

@@ -7,6 +7,7 @@ import math
 import jax.numpy as jnp
 import numpy as np
 
+from sphjax._text import show
 from sphjax.cases._geometry import box_walls, check_positive, check_resolution, lattice, wall_layers
 from sphjax.cases._packing import periodic_neighbours, relax_periodic, summation_masses
 from sphjax.cases._systems import finish_case as _finish
@@ -27,7 +28,7 @@ def _relax_iterations(value) -> int:
         whole = False
     if not whole:
         raise ValueError(
-            f"relax_iterations must be a whole number >= 0 (0: no packing), got {value!r}"
+            f"relax_iterations must be a whole number >= 0 (0: no packing), got {show(value)}"
         )
     return int(value)
 

@@ -21,6 +21,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from sphjax._text import show
 from sphjax.cases._geometry import check_positive, check_resolution
 from sphjax.cases._systems import finish_case
 from sphjax.core.case import Case
@@ -298,9 +299,9 @@ def relax_to_rest(case: Case, params=None, *, t_end: float, damping_rate: float,
     """
     check_positive("t_end", t_end)
     if not (isinstance(damping_rate, int | float) and damping_rate >= 0):
-        raise ValueError(f"damping_rate must be a number >= 0 (1/s), got {damping_rate!r}")
+        raise ValueError(f"damping_rate must be a number >= 0 (1/s), got {show(damping_rate)}")
     if not (isinstance(segments, int) and segments >= 1):
-        raise ValueError(f"segments must be a whole number >= 1, got {segments!r}")
+        raise ValueError(f"segments must be a whole number >= 1, got {show(segments)}")
     params = case.params if params is None else params
     state = case.state_for(params)
     n_steps = max(1, int(round(t_end / case.dt / segments)))

@@ -3,9 +3,11 @@
 from __future__ import annotations
 
 import dataclasses
+import math
 from collections.abc import Callable
 from typing import Any
 
+from sphjax._text import show
 from sphjax.core.model import Model
 from sphjax.core.params import Params
 from sphjax.core.state import State
@@ -42,6 +44,14 @@ class Case:
     initial_state: Callable[[Params], State] | None = None
 
     def __post_init__(self):
+        try:
+            t_end = float(self.t_end)
+        except (TypeError, ValueError):
+            t_end = math.nan
+        if not (t_end > 0 and math.isfinite(t_end)):
+            raise ValueError(
+                f"t_end must be a positive number (the end time in s), got {show(self.t_end)}"
+            )
         # parameters act or are refused: the fields the model does not read are refused
         object.__setattr__(self, "params", self.params.for_model(self.model))
 

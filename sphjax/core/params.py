@@ -27,6 +27,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from sphjax._text import show
 from sphjax.core.pytree import pytree_dataclass
 
 Array = jax.Array
@@ -128,11 +129,11 @@ def check_value(name: str, value):
     try:
         array = np.asarray(value, dtype=float)
     except (TypeError, ValueError):
-        raise ValueError(f"Params.{name} must be {what}, got {value!r}") from None
+        raise ValueError(f"Params.{name} must be {what}, got {show(value)}") from None
     if not np.all(np.isfinite(array)):
-        raise ValueError(f"Params.{name} must be {what}, got {value!r}")
+        raise ValueError(f"Params.{name} must be {what}, got {show(value)}")
     if array.ndim == 0 and not test(float(array)):
-        raise ValueError(f"Params.{name} must be {what}, got {value!r}")
+        raise ValueError(f"Params.{name} must be {what}, got {show(value)}")
 
 
 def _group_of(name: str) -> str | None:

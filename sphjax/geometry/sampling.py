@@ -22,6 +22,8 @@ import math
 import numpy as np
 from scipy import ndimage
 
+from sphjax._text import show
+
 SIDES = ("outside", "inside")
 
 
@@ -50,9 +52,9 @@ def _check_spacing(dx) -> float:
     try:
         value = float(dx)
     except (TypeError, ValueError):
-        raise ValueError(f"dx must be a positive number, got {dx!r}") from None
+        raise ValueError(f"dx must be a positive number, got {show(dx)}") from None
     if not (value > 0 and math.isfinite(value)):
-        raise ValueError(f"dx must be a positive number, got {dx!r}")
+        raise ValueError(f"dx must be a positive number, got {show(dx)}")
     return value
 
 
@@ -61,7 +63,7 @@ def _origin(origin, dim: int) -> np.ndarray:
         return np.zeros(dim)
     o = np.asarray(origin, dtype=float)
     if o.shape != (dim,) or not np.all(np.isfinite(o)):
-        raise ValueError(f"origin must be {dim} finite numbers, got {origin!r}")
+        raise ValueError(f"origin must be {dim} finite numbers, got {show(origin)}")
     return o
 
 

@@ -22,18 +22,20 @@ from pathlib import Path
 
 import numpy as np
 
+from sphjax._text import show
+
 
 def _vector(name: str, value, dim: int | None = None) -> tuple[float, ...]:
     try:
         array = np.asarray(value, dtype=float)
     except (TypeError, ValueError):
-        raise ValueError(f"{name} must be a list of numbers, got {value!r}") from None
+        raise ValueError(f"{name} must be a list of numbers, got {show(value)}") from None
     if array.ndim != 1 or (dim is None and array.size not in (2, 3)):
-        raise ValueError(f"{name} must be a list of 2 or 3 numbers (x, y[, z]), got {value!r}")
+        raise ValueError(f"{name} must be a list of 2 or 3 numbers (x, y[, z]), got {show(value)}")
     if dim is not None and array.size != dim:
-        raise ValueError(f"{name} must have {dim} numbers (one per axis), got {value!r}")
+        raise ValueError(f"{name} must have {dim} numbers (one per axis), got {show(value)}")
     if not np.all(np.isfinite(array)):
-        raise ValueError(f"{name} must be finite, got {value!r}")
+        raise ValueError(f"{name} must be finite, got {show(value)}")
     return tuple(float(v) for v in array)
 
 
@@ -41,9 +43,9 @@ def _positive(name: str, value) -> float:
     try:
         number = float(value)
     except (TypeError, ValueError):
-        raise ValueError(f"{name} must be a positive number, got {value!r}") from None
+        raise ValueError(f"{name} must be a positive number, got {show(value)}") from None
     if not (number > 0 and math.isfinite(number)):
-        raise ValueError(f"{name} must be a positive number, got {value!r}")
+        raise ValueError(f"{name} must be a positive number, got {show(value)}")
     return number
 
 

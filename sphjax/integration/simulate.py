@@ -24,6 +24,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from sphjax._text import show
 from sphjax.core import ordering
 from sphjax.core.case import Case
 from sphjax.core.model import Model
@@ -59,6 +60,11 @@ class SimulationError(RuntimeError):
 
 class NeighborOverflowError(RuntimeError):
     """The neighbour list ran out of room where it cannot be re-allocated."""
+
+
+class NeighborOverflowWarning(UserWarning):
+    """A concrete run's neighbour list overflowed and was re-allocated (the chunk is
+    repeated with wider lists, a new compilation); the results are unaffected."""
 
 
 #: room above the largest neighbour count in the lists of a concrete (chunked) run, which
@@ -267,7 +273,7 @@ def simulate(
     Args:
       case: from ``sphjax.cases``.
       params: differentiable parameters (default ``case.params``).
-      n_steps: number of steps; or give ``t_end`` (default ``case.t_end``).
+      n_steps: number of steps; or give ``t_end`` (default ``case.t_end``), not both.
       save_every: steps between saved frames (default: only the last frame); when it
         does not divide ``n_steps`` the last frame is at ``n_steps`` (see
         ``Trajectory.times``).
@@ -294,17 +300,22 @@ def simulate(
     check_params(model, params)
     state = case.state_for(params) if state is None else state
     dt = case.dt if dt is None else dt
+    if n_steps is not None and t_end is not None:
+        raise ValueError(
+            f"give n_steps or t_end, not both (got n_steps={show(n_steps)} and "
+            f"t_end={show(t_end)}); t_end = n_steps * dt"
+        )
     if n_steps is None:
         t_end = case.t_end if t_end is None else t_end
         if not t_end > 0:
-            raise ValueError(f"t_end must be positive, got {t_end}")
+            raise ValueError(f"t_end must be a positive number, got {show(t_end)}")
         n_steps = max(1, int(math.ceil(t_end / float(dt) - 1e-9)))
     if not isinstance(n_steps, int | np.integer) or n_steps < 1:
-        raise ValueError(f"n_steps must be a positive integer, got {n_steps!r}")
+        raise ValueError(f"n_steps must be a positive integer, got {show(n_steps)}")
     n_steps = int(n_steps)
     save_every = n_steps if save_every is None else save_every
     if not isinstance(save_every, int | np.integer) or save_every < 1:
-        raise ValueError(f"save_every must be a positive integer, got {save_every!r}")
+        raise ValueError(f"save_every must be a positive integer, got {show(save_every)}")
     save_every = int(min(save_every, n_steps))
     if checkpoint_every is not None and int(checkpoint_every) < 1:
         raise ValueError(f"checkpoint_every must be a positive integer, got {checkpoint_every}")
@@ -499,6 +510,7 @@ def _run_chunk_growing(carry, dt, params, model, save_every, n_frames, start, ex
         warnings.warn(
             f"neighbour list overflowed at step {int(step) + 1}; re-allocated "
             f"({_growth(old, list_sizes(neighbors), model)}) and went on from step {int(step)}",
+            NeighborOverflowWarning,
             stacklevel=4,
         )
 
