@@ -65,8 +65,8 @@ def hook_installed() -> bool:
         warnings.warn(
             f"sphjax: the custom adjoint of the pair sums is not available on JAX "
             f"{jax.__version__} (tested with JAX {tested}); reverse mode falls back to "
-            "JAX's own transpose of the pair sums: same gradients, about 1.1-1.5 times "
-            "the time of a gradient (docs/performance_gradients.md)",
+            "JAX's own transpose of the pair sums: same gradients, slower (up to 2.5 "
+            "times per momentum pair sum; docs/performance_gradients.md)",
             stacklevel=3,
         )
     return installed
