@@ -32,8 +32,7 @@ from __future__ import annotations
 
 import jax.numpy as jnp
 
-from sphjax.physics import pairs as pair_sums
-from sphjax.physics.boundary.wall import extrapolation_terms, wall_pressure, wall_velocity
+from sphjax.physics.boundary.wall import extrapolation_summand, wall_pressure, wall_velocity
 
 
 def hydrodynamic_mass(solid: dict, fluid_params):
@@ -44,15 +43,6 @@ def hydrodynamic_mass(solid: dict, fluid_params):
 def fluid_view_of_solid(solid: dict, fluid_params) -> dict:
     """The solid as a boundary in the fluid's density sums: ``x``, ``m^fluid`` and ``v``."""
     return {"x": solid["x"], "m": hydrodynamic_mass(solid, fluid_params), "v": solid["v"]}
-
-
-def _extrapolation_summand(pair, a, b, shared):
-    return extrapolation_terms(pair, b["p"], b["rho"], b["v"])
-
-
-# measured: autodiff's transpose keeps the quotient's sums and costs less than half the
-# custom adjoint's (docs/performance_gradients.md)
-pair_sums.transpose_by_autodiff(_extrapolation_summand)
 
 
 def update_solid_boundary(system, solid: dict, fluid_system, fluid: dict, pairs, ctx) -> dict:
@@ -69,7 +59,7 @@ def update_solid_boundary(system, solid: dict, fluid_system, fluid: dict, pairs,
       fluid), ``m_fluid`` (hydrodynamic mass) and ``v_viscous``.
     """
     cols = {"x": fluid["x"], "p": fluid["p"], "rho": fluid["rho"], "v": fluid["v"]}
-    sums = ctx.pair_sum(_extrapolation_summand, {"x": solid["x"]}, cols, pairs)
+    sums = ctx.pair_sum(extrapolation_summand, {"x": solid["x"]}, cols, pairs)
     acceleration = solid["a"] if system.boundary.acceleration else jnp.zeros_like(solid["x"])
     pressure = wall_pressure(sums, ctx.params.gravity, acceleration)
     fluid_params = ctx.params.fluid

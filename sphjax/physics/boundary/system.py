@@ -16,10 +16,9 @@ import dataclasses
 import jax.numpy as jnp
 
 from sphjax.core.state import Kind
-from sphjax.physics import pairs as pair_sums
 from sphjax.physics.boundary.wall import (
     AdamiBoundary,
-    extrapolation_terms,
+    extrapolation_summand,
     wall_pressure,
     wall_velocity,
 )
@@ -57,15 +56,6 @@ class WallSystem:
         return dataclasses.replace(self, **changes)
 
 
-def _extrapolation_summand(pair, a, b, shared):
-    return extrapolation_terms(pair, b["p"], b["rho"], b["v"])
-
-
-# measured: autodiff's transpose keeps the quotient's sums and costs less than half the
-# custom adjoint's (docs/performance_gradients.md)
-pair_sums.transpose_by_autodiff(_extrapolation_summand)
-
-
 def update_wall(system: WallSystem, wall: dict, fluid_system, fluid: dict, pairs, ctx):
     """Update stage of a wall: pressure, density and viscous velocity from the fluid.
 
@@ -76,7 +66,7 @@ def update_wall(system: WallSystem, wall: dict, fluid_system, fluid: dict, pairs
       ``wall`` with ``p``, ``rho`` and ``v_viscous``.
     """
     cols = {"x": fluid["x"], "p": fluid["p"], "rho": fluid["rho"], "v": fluid["v"]}
-    sums = ctx.pair_sum(_extrapolation_summand, {"x": wall["x"]}, cols, pairs)
+    sums = ctx.pair_sum(extrapolation_summand, {"x": wall["x"]}, cols, pairs)
     pressure = wall_pressure(sums, ctx.params.gravity, jnp.zeros_like(wall["x"]))
     density = fluid_system.equation_of_state.density(pressure, ctx.params.fluid)
     v_viscous = wall_velocity(sums, wall["v"]) if system.boundary.no_slip else wall["v"]

@@ -17,6 +17,7 @@ import dataclasses
 import jax.numpy as jnp
 
 from sphjax.core.space import covered, scale
+from sphjax.physics import pairs as pair_sums
 
 
 def extrapolation_terms(pair, pressure_f, density_f, velocity_f):
@@ -27,6 +28,17 @@ def extrapolation_terms(pair, pressure_f, density_f, velocity_f):
         "rho_r": scale(density_f * pair.w, pair.dr),
         "velocity": scale(pair.w, velocity_f),
     }
+
+
+def extrapolation_summand(pair, a, b, shared):
+    """The pair summand of the Adami extrapolation onto a wall or solid boundary particle
+    ``a`` from its fluid neighbour ``b`` (:func:`extrapolation_terms`)."""
+    return extrapolation_terms(pair, b["p"], b["rho"], b["v"])
+
+
+# measured: autodiff's transpose keeps the quotient's sums and costs less than half the
+# custom adjoint's (benchmarks/pair_costs.py, docs/performance_gradients.md)
+pair_sums.transpose_by_autodiff(extrapolation_summand)
 
 
 def wall_pressure(sums, gravity, wall_acceleration):
