@@ -113,6 +113,117 @@ def test_example_cantilever_falls_freely_at_first(tmp_path):
     assert np.allclose(trajectory.times, [0.0, 0.01])  # the file's save_dt = 0.01
 
 
+def _plate_toml(case) -> str:
+    """The built-in hydrostatic_fsi_plate ``case`` (cell placement) as a set-up file: a
+    tank whose floor is the plate, side walls filled with wall particles standing on the
+    clamps, every number as the case computes it."""
+    i, p, d = case.info, case.params, case.model.domain
+    dx, L, t, H = i["dx"], i["length"], i["thickness"], i["depth"]
+    cutoff = case.model.kernel.support * case.model.smoothing_length
+    layers = math.ceil(cutoff / dx - 1e-9)
+    wall_top = math.ceil((H + max(0.1 * H, 2 * cutoff)) / dx) * dx
+    return f"""
+dim = 2
+dx = {dx!r}
+h_factor = {case.model.smoothing_length / dx!r}
+gravity = [0.0, {float(p.gravity[1])!r}]
+[time]
+t_end = 1.0
+dt = {case.dt!r}
+[domain]
+lower = [{d.lower[0]!r}, {d.lower[1]!r}]
+upper = [{d.upper[0]!r}, {d.upper[1]!r}]
+[fluid]
+density = {float(p.reference_density)!r}
+sound_speed = {float(p.sound_speed)!r}
+artificial_viscosity = {float(p.artificial_alpha)!r}
+density_diffusion = {float(p.density_diffusion)!r}
+hydrostatic = true
+[[fluid.shapes]]
+shape = "rectangle"
+lower = [0.0, 0.0]
+upper = [{L!r}, {H!r}]
+[walls]
+[[walls.shapes]]
+shape = "rectangle"
+lower = [{-layers * dx!r}, 0.0]
+upper = [0.0, {wall_top!r}]
+side = "fill"
+[[walls.shapes]]
+shape = "rectangle"
+lower = [{L!r}, 0.0]
+upper = [{L + layers * dx!r}, {wall_top!r}]
+side = "fill"
+[solid]
+density = {float(p.solid_density)!r}
+young_modulus = {float(p.young_modulus)!r}
+poisson_ratio = {float(p.poisson_ratio)!r}
+substeps = {i["substeps"]}
+[[solid.shapes]]
+shape = "rectangle"
+lower = [0.0, {-t!r}]
+upper = [{L!r}, 0.0]
+[[solid.clamps]]
+shape = "rectangle"
+lower = [{-2 * layers * dx!r}, {-t!r}]
+upper = [0.0, 0.0]
+[[solid.clamps]]
+shape = "rectangle"
+lower = [{L!r}, {-t!r}]
+upper = [{L + 2 * layers * dx!r}, 0.0]
+"""
+
+
+@pytest.mark.parametrize("n", [2, 3])
+def test_toml_fsi_plate_is_the_built_in_one(tmp_path, n):
+    """A fluid, walls and an elastic solid in one file make the coupled case: the file of
+    the built-in hydrostatic plate (split integration, 5 plate steps a step) builds it
+    particle for particle, with the same model (the solid a no-slip moving boundary for
+    the fluid), parameters and step, so the runs are the same bit for bit."""
+    theirs = sphjax.cases.get("hydrostatic_fsi_plate", n=n, length=0.3, depth=0.1, substeps=5)
+    ours = from_toml(_write(tmp_path, "plate.toml", _plate_toml(theirs)))
+    for field in ("position", "velocity", "density", "mass", "kind", "volume"):
+        a, b = np.asarray(getattr(ours.state, field)), np.asarray(getattr(theirs.state, field))
+        assert a.shape == b.shape and np.array_equal(a, b), field
+    assert ours.model == theirs.model
+    assert ours.model.system(sphjax.SolidSystem).substeps == 5
+    for (name, a), (_, b) in zip(ours.params.items(), theirs.params.items(), strict=True):
+        assert np.array_equal(np.asarray(a), np.asarray(b)), name
+    assert ours.dt == theirs.dt
+    # the initial state follows the parameters as the built-in one's does
+    params = theirs.params.replace(sound_speed=5.0, solid_density=900.0)
+    for field in ("density", "mass"):
+        a = np.asarray(getattr(ours.state_for(params), field))
+        assert np.array_equal(a, np.asarray(getattr(theirs.state_for(params), field))), field
+
+
+def test_example_fsi_plate_sags_under_the_column():
+    """examples/fsi_plate.toml (0.5 m plate, 0.02 m thick, under 0.3 m of water) at dx =
+    0.01: split integration by default, with as many plate steps a step as the plate's
+    stable step fits in the fluid's (t = 0: c0 = 17.2 m/s, c_s = sqrt(E / (2 (1 - 2 nu))
+    / rho_s)); the plate's mid-span sags, no faster than free of elastic forces under its
+    weight and the column's, ``g (1 + rho_f H / (rho_s t))``; the clamps stay put."""
+    case = from_toml(EXAMPLES / "fsi_plate.toml", dx=0.01)
+    h = 1.2 * 0.01
+    c_s = math.sqrt(1.0e8 / (2 * (1 - 2 * 0.3)) / 1200.0)
+    dt_fluid, dt_solid = 0.25 * h / 17.2, 0.3 * h / c_s
+    assert case.info["substeps"] == int(dt_fluid / dt_solid) == 15
+    assert case.dt == pytest.approx(min(dt_fluid, 15 * dt_solid), rel=1e-6)
+    assert (case.info["n_fluid"], case.info["n_solid"], case.info["n_clamped"]) == (1500, 100, 12)
+    solid = case.model.system(sphjax.SolidSystem)
+    assert solid.boundary.no_slip and solid.substeps == 15
+    trajectory = sphjax.simulate(case, n_steps=30, save_every=30)
+    kind = np.asarray(case.state.kind)
+    x0, x1 = (np.asarray(trajectory.states.position[i]) for i in (0, -1))
+    mid = (kind == sphjax.Kind.SOLID) & (np.abs(x0[:, 0] - 0.25) < 0.0051)
+    sag = float(np.mean(x1[mid, 1] - x0[mid, 1]))
+    t = float(trajectory.times[-1])
+    loaded_fall = -0.5 * 9.81 * (1.0 + 1000.0 * 0.3 / (1200.0 * 0.02)) * t**2
+    assert loaded_fall < sag < -1e-4, (sag, loaded_fall)
+    clamped = kind == sphjax.Kind.CLAMPED
+    assert np.array_equal(x0[clamped], x1[clamped])
+
+
 def test_the_files_time_step_and_saving_are_used(tmp_path):
     text = _edit("t_end = 0.1", "t_end = 0.1\ndt = 1e-4\nsave_every = 2", SOLID)
     path = _write(tmp_path, "s.toml", text)
@@ -364,8 +475,30 @@ BAD_FILES = [
         "domain: 138 particles lie outside it (e.g. at -0.125, -0.125); enlarge",
     ),
     (
-        BASE + SOLID.split("[solid]")[1].join(["[solid]", ""]),
-        "solid: a fluid and a solid in one set-up",
+        BASE + _edit("[0.0, 0.0]", "[-0.2, -0.1]", SOLID.split("[time]")[1].split("\n", 2)[2]),
+        "solid.shapes: 14 of their particles lie in the walls (e.g. at -0.125, -0.075); a "
+        "solid and the walls may touch but not overlap",
+    ),
+    (
+        _edit("poisson_ratio = 0.3", "poisson_ratio = 0.3\nsubsteps = 4", SOLID),
+        "solid.substeps: concerns a solid in a fluid only (fluid-structure coupling); remove "
+        "it or add a [fluid] section",
+    ),
+    (
+        _edit("poisson_ratio = 0.3", 'poisson_ratio = 0.3\nslip = "free_slip"', SOLID),
+        "solid.slip: concerns a solid in a fluid only",
+    ),
+    (
+        BASE + _edit("0.3\n", '0.3\nsubsteps = "fast"\n', SOLID.split("t_end = 0.1\n")[1]),
+        "solid.substeps: must be a whole number >= 1 or \"auto\", got 'fast'",
+    ),
+    (
+        BASE + _edit("0.3\n", "0.3\nsubsteps = 2.5\n", SOLID.split("t_end = 0.1\n")[1]),
+        "solid.substeps: must be a whole number, got 2.5",
+    ),
+    (
+        BASE + _edit("0.3\n", '0.3\nslip = "slippy"\n', SOLID.split("t_end = 0.1\n")[1]),
+        "solid.slip: unknown value 'slippy'; did you mean 'no_slip'?",
     ),
     (_edit("[fluid]", "[fluids]"), "fluids: unknown key; did you mean 'fluid'?"),
     (

@@ -30,7 +30,7 @@ from sphjax.core.kernels import as_kernel
 from sphjax.core.model import Domain, Model
 from sphjax.core.params import make_params
 from sphjax.core.state import Kind, make_state
-from sphjax.integration.timestep import stable_time_step
+from sphjax.integration.timestep import split_substeps, stable_time_step
 from sphjax.physics.fluid.eos import tait_density
 from sphjax.physics.solid.boundary import SolidBoundary
 from sphjax.physics.solid.penalty import PenaltyForce
@@ -172,11 +172,8 @@ def _finish(name, model, params, initial_state, t_end, info, cfl, substeps=1, pe
     (a plate sampled a few times a period oscillates about the wrong deflection)."""
     state = initial_state(params)
     if substeps == "auto":
-        dt_solid = stable_time_step(state, model, params, solid_cfl=cfl)
-        dt = stable_time_step(state, model.replace(systems=model.systems[:-1]), params)
-        if period is not None:
-            dt = min(dt, period / STEPS_PER_PERIOD)
-        substeps = max(1, int(dt / dt_solid))
+        max_dt = None if period is None else period / STEPS_PER_PERIOD
+        substeps = split_substeps(state, model, params, solid_cfl=cfl, max_dt=max_dt)
     solid = model.system(SolidSystem).replace(substeps=_check_substeps(substeps))
     model = model.replace(systems=model.systems[:-1] + (solid,))
     info = {**info, "substeps": substeps}

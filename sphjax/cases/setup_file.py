@@ -35,7 +35,13 @@ from sphjax.core.kernels import KERNELS, kernel_by_name
 from sphjax.core.model import Domain, Model
 from sphjax.core.params import make_params
 from sphjax.core.state import Kind, make_state
-from sphjax.integration.timestep import FLUID_CFL, SOLID_CFL, check_time_step, stable_time_step
+from sphjax.integration.timestep import (
+    FLUID_CFL,
+    SOLID_CFL,
+    check_time_step,
+    split_substeps,
+    stable_time_step,
+)
 from sphjax.physics.boundary.system import WallSystem
 from sphjax.physics.boundary.wall import AdamiBoundary
 from sphjax.physics.fluid.density import ContinuityDensity, SummationDensity
@@ -43,6 +49,7 @@ from sphjax.physics.fluid.density_diffusion import MolteniColagrossi
 from sphjax.physics.fluid.eos import LinearEOS, TaitEOS
 from sphjax.physics.fluid.system import FluidSystem
 from sphjax.physics.fluid.viscosity import ArtificialViscosity, MorrisViscosity
+from sphjax.physics.solid.boundary import SolidBoundary
 from sphjax.physics.solid.penalty import PenaltyForce
 from sphjax.physics.solid.system import SolidSystem
 
@@ -296,20 +303,13 @@ def read_setup(path) -> dict:
         top.known.append(name)
     s["fluid"] = _fluid(raw["fluid"], dim, folder) if "fluid" in raw else None
     s["walls"] = _walls(raw["walls"], dim, folder) if "walls" in raw else None
-    s["solid"] = _solid(raw["solid"], dim, folder) if "solid" in raw else None
+    s["solid"] = _solid(raw["solid"], dim, folder, "fluid" in raw) if "solid" in raw else None
     s["domain"] = _domain(raw["domain"], dim) if "domain" in raw else None
     top.done()
     if s["walls"] is not None and s["fluid"] is None:
         raise SetupError("walls", "walls act on a fluid only; add a [fluid] section or remove it")
     if s["fluid"] is None and s["solid"] is None:
         raise SetupError(None, "the file describes no body; add a [fluid] or a [solid] section")
-    if s["fluid"] is not None and s["solid"] is not None:
-        raise SetupError(
-            "solid",
-            "a fluid and a solid in one set-up are not supported by set-up files yet; "
-            "describe them in separate files, or use a coupled case such as "
-            "'sphjax run hydrostatic_fsi_plate'",
-        )
     return s
 
 
@@ -372,7 +372,9 @@ def _walls(table, dim, folder) -> dict:
     return w
 
 
-def _solid(table, dim, folder) -> dict:
+def _solid(table, dim, folder, coupled: bool) -> dict:
+    """``[solid]``; ``coupled``: the file has a fluid too, which the solid's ``slip`` and
+    ``substeps`` concern."""
     t = _Table(table, "solid")
     s = dict(
         density=t.get("density", "number", positive=True, hint=" (the density in kg/m^3)"),
@@ -380,15 +382,38 @@ def _solid(table, dim, folder) -> dict:
         poisson_ratio=t.get("poisson_ratio", "number", hint=" (a number in (-1, 0.5))"),
         penalty_alpha=t.get("penalty_alpha", "number", None, non_negative=True),
         velocity=t.get("velocity", "vector", (0.0,) * dim, length=dim),
+        slip=t.get("slip", "string", None, choices=("no_slip", "free_slip")),
+        substeps=_substeps(t),
     )
     if not -1.0 < s["poisson_ratio"] < 0.5:
         raise SetupError(
             "solid.poisson_ratio", f"must lie in (-1, 0.5), got {s['poisson_ratio']:g}"
         )
+    for key in ("slip", "substeps"):
+        if s[key] is not None and not coupled:
+            raise SetupError(
+                f"solid.{key}",
+                "concerns a solid in a fluid only (fluid-structure coupling); remove it "
+                "or add a [fluid] section",
+            )
+    if coupled:
+        s["slip"] = s["slip"] or "no_slip"
+        s["substeps"] = s["substeps"] or "auto"
     s["shapes"] = _shapes(t, "shapes", dim, folder)
     s["clamps"] = _shapes(t, "clamps", dim, folder, required=False)
     t.done()
     return s
+
+
+def _substeps(t: _Table):
+    """``solid.substeps``: a whole number >= 1 or ``"auto"``; ``None`` when absent."""
+    t.known.append("substeps")
+    value = t.table.get("substeps")
+    if value is None or value == "auto":
+        return value
+    if isinstance(value, str):
+        raise SetupError(t.key("substeps"), f'must be a whole number >= 1 or "auto", got {value!r}')
+    return _number(t.key("substeps"), value, positive=True, integer=True)
 
 
 def _domain(table, dim) -> dict:
@@ -512,6 +537,9 @@ def build_setup(s: dict) -> Case:
             if opts["side"] != "outside":
                 obstacles.append(shape)
             wall_blocks.append((x, opts["side"]))
+    solid = s["solid"]
+    if solid is not None:  # a solid in a fluid displaces it
+        obstacles += [shape for shape, _ in solid["shapes"] + solid["clamps"]]
     x_wall, wall_tag = _unique_sites(wall_blocks, dx, origin)
     x_fluid, fluid_tag = _unique_sites(fluid_blocks, dx, origin)
     if len(x_fluid):
@@ -533,7 +561,7 @@ def build_setup(s: dict) -> Case:
         raise SetupError("fluid.shapes", f"hold no particle at dx = {dx:g}; use a smaller dx")
 
     # solid and clamped sites
-    solid, x_solid, x_clamped = s["solid"], np.zeros((0, dim)), np.zeros((0, dim))
+    x_solid, x_clamped = np.zeros((0, dim)), np.zeros((0, dim))
     if solid is not None:
         body = [
             (sample(shape, f"solid.shapes[{i}]"), None)
@@ -547,6 +575,15 @@ def build_setup(s: dict) -> Case:
         x_clamped, _ = _unique_sites(clamps, dx, origin)
         held = _members(_keys(x_body, dx, origin), _keys(x_clamped, dx, origin))
         x_solid = x_body[~held]
+        for key, x_part in (("solid.shapes", x_body), ("solid.clamps", x_clamped)):
+            in_walls = _members(_keys(x_part, dx, origin), _keys(x_wall, dx, origin))
+            if np.any(in_walls):
+                raise SetupError(
+                    key,
+                    f"{int(in_walls.sum())} of their particles lie in the walls (e.g. at "
+                    f"{', '.join(f'{v:.4g}' for v in x_part[np.argmax(in_walls)])}); a solid "
+                    "and the walls may touch but not overlap: move or shorten one of them",
+                )
         if len(x_solid) == 0:
             raise SetupError(
                 "solid.shapes",
@@ -607,8 +644,12 @@ def build_setup(s: dict) -> Case:
     if len(x_wall):
         systems.append(WallSystem(AdamiBoundary(no_slip=s["walls"]["slip"] == "no_slip")))
     if solid is not None:
+        boundary = SolidBoundary(no_slip=solid["slip"] != "free_slip")
         systems.append(
-            SolidSystem(penalty=None if solid["penalty_alpha"] is None else PenaltyForce())
+            SolidSystem(
+                penalty=None if solid["penalty_alpha"] is None else PenaltyForce(),
+                boundary=boundary,
+            )
         )
         values.update(
             young_modulus=solid["young_modulus"],
@@ -644,6 +685,14 @@ def build_setup(s: dict) -> Case:
         )
 
     state = initial_state(params)
+    cfl = s["cfl"]
+    fluid_cfl, solid_cfl = cfl or FLUID_CFL, cfl or SOLID_CFL
+    substeps = solid["substeps"] if solid is not None else None
+    if substeps is not None:  # a solid in a fluid: split integration
+        if substeps == "auto":
+            substeps = split_substeps(state, model, params, fluid_cfl, solid_cfl)
+        split = model.system(SolidSystem).replace(substeps=substeps)
+        model = model.replace(systems=model.systems[:-1] + (split,))
     if s["dt"] is not None:
         try:
             check_time_step(s["dt"], state, model, params)
@@ -651,10 +700,7 @@ def build_setup(s: dict) -> Case:
             raise SetupError("time.dt", str(err).removeprefix("dt=")) from None
         dt = s["dt"]
     else:
-        cfl = s["cfl"]
-        dt = stable_time_step(
-            state, model, params, fluid_cfl=cfl or FLUID_CFL, solid_cfl=cfl or SOLID_CFL
-        )
+        dt = stable_time_step(state, model, params, fluid_cfl, solid_cfl)
     info = dict(
         dx=dx,
         setup=s["path"],
@@ -662,6 +708,7 @@ def build_setup(s: dict) -> Case:
         n_wall=len(x_wall),
         n_solid=len(x_solid),
         n_clamped=len(x_clamped),
+        substeps=substeps,
         dt_given=s["dt"] is not None,
         save_every=s["save_every"],
         save_dt=s["save_dt"],

@@ -59,6 +59,28 @@ def stable_time_step(
     return min(limits)
 
 
+def split_substeps(
+    state: State, model, params, fluid_cfl=FLUID_CFL, solid_cfl=SOLID_CFL, max_dt=None
+) -> int:
+    """Split integration's ``"auto"`` (``SolidSystem.substeps``): the whole number of the
+    solid's stable steps in the fluid's stable step, or in ``max_dt`` if that is shorter
+    (e.g. a fraction of the solid's first period, so that the fluid's force on it, sampled
+    once a step, follows its motion); at least 1."""
+    unsplit = model.replace(
+        systems=tuple(
+            s.replace(substeps=1) if isinstance(s, SolidSystem) else s for s in model.systems
+        )
+    )
+    dt_solid = stable_time_step(state, unsplit, params, fluid_cfl, solid_cfl)
+    fluid_only = model.replace(
+        systems=tuple(s for s in model.systems if not isinstance(s, SolidSystem))
+    )
+    dt = stable_time_step(state, fluid_only, params, fluid_cfl, solid_cfl)
+    if max_dt is not None:
+        dt = min(dt, max_dt)
+    return max(1, int(dt / dt_solid))
+
+
 def check_time_step(dt: float, state: State, model, params) -> None:
     """Raise a ValueError naming ``dt`` if it exceeds the stability limit."""
     if not dt > 0 or not math.isfinite(dt):
