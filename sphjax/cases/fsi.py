@@ -380,7 +380,7 @@ def hydrostatic_fsi_plate(
     h_factor: float | None = None,
     cfl: float = 0.5,
     t_end: float | None = None,
-    substeps: int | str = 1,
+    substeps: int | str = "auto",
     placement: str = "cell",
     *,
     face_weight: float = 1.0,
@@ -408,8 +408,10 @@ def hydrostatic_fsi_plate(
       t_end: default ``20`` periods of the plate's first dry bending mode.
       substeps: split integration (``SolidSystem.substeps``): the plate takes this many
         steps of its own per step, the step ``substeps`` times the solid's stable one (up
-        to the fluid's); ``"auto"``: as many as fit in the fluid's stable step and in
-        1/20 of the dry first-mode period.
+        to the fluid's); ``"auto"`` (the default): as many as fit in the fluid's stable
+        step and in 1/20 of the dry first-mode period (63 with the defaults: 878 steps
+        instead of 55,338; the static deflection moves by 0.1-2 %,
+        docs/validation_fsi.md); ``1``: the unsplit step.
       placement: ``"cell"`` (the default: particles at the centres of square cells that
         tile the plate, the clamped cells beyond its ends) or ``"surface"`` (``n`` rows
         with the outer ones on the faces ``y = -t`` and ``y = 0`` and columns on
@@ -534,7 +536,7 @@ def elastic_gate_dam_break(
     h_factor: float = 1.5,
     cfl: float = 0.5,
     t_end: float = 0.4,
-    substeps: int | str = 1,
+    substeps: int | str = "auto",
 ) -> Case:
     """Dam break through an elastic gate (Antoci, Gallati & Sibilla 2007), plane strain.
 
@@ -550,7 +552,10 @@ def elastic_gate_dam_break(
 
     Args:
       n: particles across the gate thickness (``dx = thickness / n``).
-      substeps: split integration, as in :func:`hydrostatic_fsi_plate`.
+      substeps: split integration, as in :func:`hydrostatic_fsi_plate`; ``"auto"`` (the
+        default) takes 3 gate steps a step at n = 2 and 4: 3,523 steps to t = 0.12 s
+        instead of 10,569, the tip within 0.3 mm (0.8 %) of the unsplit run's, 15 % less
+        CPU time (the gate is a small part of a step).
     """
     n = check_resolution("n", n, 2)
     W = check_positive("column_width", column_width)
@@ -635,7 +640,7 @@ def dam_break_elastic_obstacle(
     h_factor: float = 1.5,
     cfl: float = 0.5,
     t_end: float = 1.0,
-    substeps: int | str = 1,
+    substeps: int | str = "auto",
 ) -> Case:
     """A dam break hitting an elastic plate fixed to the floor (Zhan et al. 2019, section
     6.5; TrixiParticles' ``dam_break_plate_2d``), plane strain.
@@ -650,7 +655,8 @@ def dam_break_elastic_obstacle(
 
     Args:
       n: particles across the plate thickness (``dx = thickness / n``).
-      substeps: split integration, as in :func:`hydrostatic_fsi_plate`.
+      substeps: split integration, as in :func:`hydrostatic_fsi_plate`; ``"auto"`` (the
+        default) is 1 here, the soft plate's stable step being about the fluid's.
     """
     n = check_resolution("n", n, 2)
     L = check_positive("column_width", column_width)
