@@ -68,6 +68,7 @@ class NeighborSearch:
         )
 
     def to_box(self, position):
+        """``position`` in jax-md's box (numpy for a numpy array, else jax.numpy)."""
         domain = self.model.domain
         offset = np.array(
             [
@@ -77,7 +78,7 @@ class NeighborSearch:
         )
         shifted = position + offset.astype(position.dtype)
         box = self.box.astype(position.dtype)
-        return jnp.mod(shifted, box)
+        return (np.mod if isinstance(position, np.ndarray) else jnp.mod)(shifted, box)
 
     @functools.cache  # noqa: B019 (one NeighborSearch per Model, cached in integrate)
     def _functions(self, dr_threshold: float):
@@ -112,25 +113,74 @@ class NeighborSearch:
         ``at_least``: the fewest slots per particle (a size measured elsewhere, e.g. where
         an earlier list overflowed).
         """
-        fns = self._functions(self.skin)
-        x = self.to_box(jnp.asarray(position))
-        neighbors = fns.allocate(x, extra_capacity=extra_capacity)
+        x = self.to_box(np.asarray(position))
+        neighbors = self._allocate(x, extra_capacity)
         if capacity(neighbors) < at_least:
             more = extra_capacity + at_least - capacity(neighbors)
-            neighbors = fns.allocate(x, extra_capacity=more)
+            neighbors = self._allocate(x, more)
         if margin is not None:
-            n = neighbors.idx.shape[0]
-            most = int(jnp.max(jnp.sum(neighbors.idx < n, axis=1), initial=0))
+            idx = np.asarray(neighbors.idx)
+            most = int(np.max(np.sum(idx < idx.shape[0], axis=1), initial=0))
             width = max(1, int(math.ceil(most * (1.0 + margin))) + int(extra_capacity), at_least)
             if width < capacity(neighbors):
                 # jax-md packs each row's neighbours first: the columns cut hold padding
-                neighbors = neighbors.set(idx=neighbors.idx[:, :width], max_occupancy=width)
+                neighbors = neighbors.set(idx=jnp.asarray(idx[:, :width]), max_occupancy=width)
+        return neighbors
+
+    def _allocate(self, x, extra_capacity: int):
+        """jax-md's dense allocation for the concrete boxed positions ``x`` (numpy), the
+        same list, in one compiled program instead of jax-md's eager set-up (some 40
+        small programs compiled on first use, most of a small run's start-up): the cell
+        capacity is counted here as jax-md counts it (the fullest cell times
+        ``Model.neighbor_capacity``, plus ``extra_capacity``), the list is built by the
+        jitted rebuild at the full width of the candidates (which cannot overflow), and
+        cut to jax-md's width, its largest row times the multiplier plus the extra."""
+        fns = self._functions(self.skin)
+        n, dim = x.shape
+        cutoff = self.model.cutoff + self.skin
+        box = self.box.astype(np.float32)  # jax-md's cell list takes the box in float32
+        cells = np.floor(box / cutoff)
+        if not np.all(cutoff < box / 3.0):  # jax-md searches without a cell list
+            neighbors = fns.allocate(jnp.asarray(x), extra_capacity=extra_capacity)
+            return neighbors.set(
+                cell_list_fn=_CELL_LIST_FNS.setdefault(self, neighbors.cell_list_fn)
+            )
+        cell_size = box / cells
+        index = np.mod((x / cell_size).astype(np.int32), cells.astype(np.int32))
+        strides = np.cumprod(np.concatenate([[1], cells[:-1]])).astype(np.int64)
+        fullest = np.bincount(index @ strides, minlength=int(np.prod(cells))).max()
+        cell_capacity = int(fullest * self.model.neighbor_capacity) + int(extra_capacity)
         # The update and cell-list functions are static (pytree metadata) in the list: new
-        # function objects at every allocation would make every jitted step recompile.
-        # ``_functions`` is cached; jax-md makes a new cell-list function object at each
-        # allocation, so keep the first one (same box, cell size and multiplier).
-        cell_list_fn = _CELL_LIST_FNS.setdefault(self, neighbors.cell_list_fn)
-        return neighbors.set(cell_list_fn=cell_list_fn)
+        # function objects at every allocation would make every jitted step recompile;
+        # ``_functions`` is cached, and so is the cell-list function (same box, cell size
+        # and multiplier).
+        cell_list_fn = _CELL_LIST_FNS.setdefault(
+            self, partition.cell_list(box, cutoff, self.model.neighbor_capacity)
+        )
+        width = 3**dim * cell_capacity
+        # numpy leaves: the compiled program then runs on them even inside a trace (an
+        # allocation inside jax.grad or jit)
+        template = partition.NeighborList(
+            np.zeros((n, width), np.int32),
+            x,
+            partition.PartitionError(np.zeros((), np.uint8)),
+            cell_capacity,
+            width,
+            partition.Dense,
+            cutoff,
+            cell_list_fn,
+            fns.update,
+        )
+        full = _build(self, x.shape, x.dtype.str, cell_capacity)(x, template)
+        idx = np.asarray(full.idx)
+        most = int(np.max(np.sum(idx < n, axis=1), initial=0))
+        occupancy = int(most * self.model.neighbor_capacity + extra_capacity)
+        occupancy = min(occupancy, width, n - 1)
+        return full.set(
+            idx=jnp.asarray(idx[:, :occupancy]),
+            max_occupancy=occupancy,
+            reference_position=jnp.asarray(x),
+        )
 
     def update(self, position, neighbors):
         """Update inside ``jit``: rebuilt only if a particle moved more than half the skin."""
@@ -140,6 +190,28 @@ class NeighborSearch:
         """Force a rebuild at ``position`` with the capacity of ``neighbors`` (jittable)."""
         fns = self._functions(0.0)
         return fns.update(self.to_box(position), neighbors)
+
+
+@functools.lru_cache(maxsize=32)
+def _build(search: NeighborSearch, shape: tuple, dtype: str, cell_capacity: int):
+    """The compiled forced rebuild of ``search`` (``Compiled(x, template) -> list``) for
+    positions of ``shape`` and ``dtype`` at the full candidate width of ``cell_capacity``;
+    kept for later allocations of the same shape (the chunked driver's, a calibration's)."""
+    rebuild = search._functions(0.0).update  # a zero threshold always rebuilds
+    width = 3 ** shape[1] * cell_capacity
+    template = partition.NeighborList(
+        jax.ShapeDtypeStruct((shape[0], width), np.int32),
+        jax.ShapeDtypeStruct(shape, np.dtype(dtype)),
+        partition.PartitionError(jax.ShapeDtypeStruct((), np.uint8)),
+        cell_capacity,
+        width,
+        partition.Dense,
+        search.model.cutoff + search.skin,
+        _CELL_LIST_FNS[search],
+        search._functions(search.skin).update,
+    )
+    position = jax.ShapeDtypeStruct(shape, np.dtype(dtype))
+    return jax.jit(rebuild).lower(position, template).compile()
 
 
 def capacity(neighbors) -> int:

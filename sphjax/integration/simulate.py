@@ -14,6 +14,7 @@ Frames are saved every ``save_every`` steps and at the last step.
 
 from __future__ import annotations
 
+import contextlib
 import functools
 import math
 import operator
@@ -218,6 +219,14 @@ _run_chunk = jax.jit(
 # ---------------------------------------------------------------------------- simulate
 
 
+def _concrete(traced: bool):
+    """``jax.ensure_compile_time_eval()`` inside a trace (``traced`` inputs or an outer
+    ``jit``), where the set-up must stay concrete; outside one a no-op: compile-time
+    evaluation would run the compiled set-up programs op by op, compiling each op."""
+    inside = traced or isinstance(jnp.asarray(0), jax.core.Tracer)
+    return jax.ensure_compile_time_eval() if inside else contextlib.nullcontext()
+
+
 def _is_traced(*trees) -> bool:
     return any(isinstance(x, jax.core.Tracer) for x in jax.tree_util.tree_leaves(trees))
 
@@ -338,13 +347,13 @@ def simulate(
     if order is not None:
         back = ordering.inverse(order)
         state = ordering.permute(state, order)
-        with jax.ensure_compile_time_eval():  # concrete even inside an outer jit
+        with _concrete(traced):  # concrete even inside an outer jit
             neighbor_state = ordering.permute(neighbor_state, order)
         if on_frames is not None:
             on_frames = functools.partial(_in_user_order, on_frames, back)
     # Allocation needs concrete values; inside an outer ``jit`` the jax-md set-up would
     # otherwise be staged out and fail on a traced box size.
-    with jax.ensure_compile_time_eval():
+    with _concrete(traced):
         neighbors = build_neighbors(
             neighbor_state,
             model,
