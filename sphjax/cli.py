@@ -253,7 +253,8 @@ def _add_run(sub) -> None:
 
 _SLICE_HELP = (
     "3D trajectories: draw only the particles within one kernel support of a plane, e.g. "
-    "z=0.5 (default: the x-y projection)"
+    "z=0.5 (default: a side view, the vertical axis against gravity and the view along the "
+    "shorter horizontal extent, e.g. x-z for gravity along -z; x-y without gravity)"
 )
 
 
