@@ -567,7 +567,7 @@ def cmd_plot(args) -> int:
     except ValueError as err:
         raise _plot_error(err) from None
     try:
-        figure.save(out)
+        figure.save(out, overwrite=args.overwrite)
     except OSError as err:
         raise UsageError("--out", f"cannot write '{out}': {err}") from None
     finally:
@@ -598,6 +598,7 @@ def cmd_animate(args) -> int:
         n = animate(
             trajectory, meta, args.field, out, fps=args.fps, progress=not args.quiet,
             frame_numbers=range(0, meta["n_frames"], args.every), slice_plane=plane,
+            overwrite=args.overwrite,
         )  # fmt: skip
     except ValueError as err:
         raise _plot_error(err) from None
@@ -627,7 +628,9 @@ def cmd_export(args) -> int:
     _trajectory_metadata(args.file)
     trajectory, meta = _read_frames(args.file)
     try:
-        pvd = export_vtk(trajectory, meta, folder, name=Path(args.file).stem)
+        pvd = export_vtk(
+            trajectory, meta, folder, name=Path(args.file).stem, overwrite=args.overwrite
+        )
     except OSError as err:
         raise UsageError("--vtk", f"cannot write into '{folder}': {err}") from None
     print(f"wrote {len(trajectory)} frames and {pvd}", file=sys.stderr)
@@ -706,7 +709,7 @@ def cmd_dataset(args) -> int:
         )
     except (ValueError, FileExistsError) as err:
         argument = "--dt" if args.dt is not None and "dt" in str(err) else "--out"
-        raise UsageError(argument, str(err)) from None
+        raise UsageError(argument, str(err).removeprefix("out: ")) from None
     except RuntimeError as err:  # a trajectory went unstable
         print(f"sphjax dataset: error: {err}", file=sys.stderr)
         return EXIT_UNSTABLE

@@ -356,7 +356,13 @@ class FramePlot:
             f"{self.slice_text}"
         )
 
-    def save(self, path) -> Path:
+    def save(self, path, *, overwrite: bool = False) -> Path:
+        """Write the figure to ``path`` (its suffix picks the format).  An existing file
+        raises :class:`FileExistsError` (``path: 'p.png' exists; pass overwrite=True ...``)
+        unless ``overwrite``."""
+        from sphjax._paths import check_new
+
+        check_new([path], "path", overwrite)
         self.fig.savefig(path, bbox_inches="tight", pad_inches=0.1)
         return Path(path)
 
@@ -376,20 +382,26 @@ def animate(
     progress=True,
     frame_numbers=None,
     slice_plane=None,
+    overwrite: bool = False,
 ) -> int:
     """Write every frame of ``trajectory`` coloured by ``field`` to a GIF or an MP4.
 
     GIFs are written with Pillow; MP4s (H.264) with the ffmpeg binary of the
     ``imageio-ffmpeg`` package.  ``frame_numbers``: see :class:`FramePlot`.  Returns the
-    number of frames written; ``slice_plane``: see :class:`FramePlot`.
+    number of frames written; ``slice_plane``: see :class:`FramePlot`.  An existing
+    ``path`` raises :class:`FileExistsError` (``path: 'a.gif' exists; pass overwrite=True
+    ...``) before any frame is drawn, unless ``overwrite``.
     """
     from matplotlib import animation
     from tqdm import tqdm
+
+    from sphjax._paths import check_new
 
     path = Path(path)
     suffix = path.suffix.lower()
     if suffix not in MOVIE_SUFFIXES:
         raise ValueError(f"unknown movie extension {suffix!r}; use .gif or .mp4")
+    check_new([path], "path", overwrite)
     plot = FramePlot(trajectory, meta, field, frame_numbers=frame_numbers, slice_plane=slice_plane)
     n = len(trajectory)
     if suffix == ".gif":

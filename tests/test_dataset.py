@@ -145,6 +145,36 @@ def test_bad_arguments_are_named():
         )
 
 
+def test_an_existing_dataset_folder_is_not_replaced(tmp_path, monkeypatch):
+    """``generate_dataset`` into a folder that holds files (or onto a file) raises one
+    FileExistsError naming ``out`` and ``overwrite=True`` before any initial condition is
+    built, and leaves the folder as it was."""
+    import sphjax
+    from sphjax.dataset import generate, generate_dataset
+
+    def never(*args, **kwargs):
+        raise AssertionError("the refusal must come before the initial conditions")
+
+    monkeypatch.setattr(generate, "initial_conditions", never)
+    case = sphjax.cases.taylor_green(n=4)
+    sizes = dict(n_train=1, n_valid=0, n_test=0, steps=4, write_every=2)
+    folder = tmp_path / "data"
+    folder.mkdir()
+    (folder / "notes.txt").write_text("mine")
+    with pytest.raises(FileExistsError) as error:
+        generate_dataset(case, folder, **sizes)
+    assert str(error.value) == (
+        f"out: '{folder}' is not empty; pass overwrite=True to replace what it holds, "
+        "or choose another folder"
+    )
+    assert (folder / "notes.txt").read_text() == "mine"
+    (folder / "INCOMPLETE").write_text("{}")
+    with pytest.raises(FileExistsError, match=r"^out: .* pass resume=True .* overwrite=True"):
+        generate_dataset(case, folder, **sizes)
+    with pytest.raises(FileExistsError, match=r"^out: .* is a file"):
+        generate_dataset(case, folder / "notes.txt", **sizes)
+
+
 def test_cli_parses_the_dataset_command():
     from sphjax.cli import _parser as build_parser
 

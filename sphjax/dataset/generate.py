@@ -98,7 +98,9 @@ def generate_dataset(
       dt: solver step (default: the smallest stable step over all trajectories).
       batch_size: trajectories per compiled call (default 4 per device).
       resume: continue an interrupted folder (its ``INCOMPLETE`` plan must match).
-      overwrite: replace whatever ``out`` holds.
+      overwrite: replace whatever ``out`` holds; without it (and without ``resume``) a
+        folder that holds files raises :class:`FileExistsError` naming ``out`` and
+        ``overwrite=True``, before anything is simulated.
       progress: show a tqdm bar over trajectories.
       devices: JAX devices to shard over (default: all).
       case_kwargs: recorded in the metadata (how ``case`` was built).
@@ -126,6 +128,11 @@ def generate_dataset(
     out = Path(out)
     marker, partial = out / MARKER, out / PARTIAL
 
+    if out.exists() and not out.is_dir():
+        raise FileExistsError(f"out: '{out}' is a file; give the name of a folder")
+    if out.exists() and any(out.iterdir()) and not overwrite:
+        _refuse_to_replace(out, marker, resume)  # before the initial conditions are built
+
     # the whole ensemble's initial conditions, deterministic per trajectory
     jobs = initial_conditions(case, counts, perturbation, vary, seed, case_kwargs or {})
     if dt is None:
@@ -151,13 +158,8 @@ def generate_dataset(
                     f"{out} holds an incomplete dataset made with other settings; resume it "
                     "with the same arguments, or pass overwrite=True (--overwrite)"
                 )
-        elif marker.exists():
-            raise FileExistsError(
-                f"{out} holds an incomplete dataset; pass resume=True (--resume) to continue it "
-                "or overwrite=True (--overwrite) to start afresh"
-            )
         else:
-            raise FileExistsError(f"{out} is not empty; choose another folder or overwrite")
+            _refuse_to_replace(out, marker, resume)
     try:
         partial.mkdir(parents=True, exist_ok=True)
     except OSError as error:
@@ -206,6 +208,22 @@ def generate_dataset(
 
     _assemble(out, case, plan, jobs, part_file)
     return out
+
+
+def _refuse_to_replace(out: Path, marker: Path, resume: bool) -> None:
+    """Raise FileExistsError for a folder ``out`` that holds files, unless it holds an
+    interrupted dataset (``marker``) and ``resume`` is asked for."""
+    if marker.exists() and resume:
+        return
+    if marker.exists():
+        raise FileExistsError(
+            f"out: '{out}' holds an incomplete dataset; pass resume=True to continue it "
+            "or overwrite=True to start afresh"
+        )
+    raise FileExistsError(
+        f"out: '{out}' is not empty; pass overwrite=True to replace what it holds, "
+        "or choose another folder"
+    )
 
 
 def _check_finite(x, split, i):
