@@ -714,9 +714,11 @@ def cmd_dataset(args) -> int:
         print(f"sphjax dataset: error: {err}", file=sys.stderr)
         return EXIT_UNSTABLE
     n, seconds = timings.get("trajectories", 0), timings.get("seconds", 0.0)
+    compiling, per_minute = timings.get("compile_seconds", 0.0), timings.get("per_minute")
+    rate = f"{per_minute:.3g}" if per_minute is not None and math.isfinite(per_minute) else "?"
     print(
-        f"wrote {out}: {n} trajectories simulated in {seconds:.1f} s "
-        f"({timings.get('per_minute', 0.0):.1f} trajectories per minute, compilation included)"
+        f"wrote {out}: {n} trajectories simulated in {seconds:.1f} s wall "
+        f"({compiling:.1f} s compiling), {rate} trajectories per minute after compilation"
     )
     return EXIT_OK
 

@@ -28,6 +28,7 @@ import h5py
 import jax
 import numpy as np
 
+from sphjax._compile import CompileTimer
 from sphjax.core.case import Case
 from sphjax.dataset.format import FORMAT_VERSION, metadata, particle_types, statistics
 from sphjax.dataset.perturb import SPLITS, Perturbation, check_vary, initial_conditions
@@ -106,7 +107,10 @@ def generate_dataset(
       case_kwargs: recorded in the metadata (how ``case`` was built).
       stop_after: stop after this many batches, leaving the folder incomplete (tests).
       timings: a dict filled with ``trajectories`` (simulated in this call), ``seconds``
-        (wall clock, compilation included) and ``per_minute`` (trajectories per minute).
+        (wall clock, compilation included), ``compile_seconds`` (of those, the time spent
+        tracing and compiling the batch program, or loading it from JAX's cache) and
+        ``per_minute`` (trajectories per minute after compilation: over ``seconds -
+        compile_seconds``).
     Returns:
       the dataset folder, or the incomplete folder if stopped early.
     """
@@ -184,30 +188,45 @@ def generate_dataset(
         unit="traj",
         disable=not progress,
     )
+    with CompileTimer() as timer:
+        finished = _run_batches(
+            runner, todo, batch_size, stop_after, partial, part_file, bar, _check_finite
+        )
+    if not finished:
+        return out
+    if timings is not None:
+        seconds = time.perf_counter() - started
+        compiling = min(timer.seconds(started), seconds)
+        running = seconds - compiling
+        timings.update(
+            trajectories=len(todo),
+            seconds=seconds,
+            compile_seconds=compiling,
+            per_minute=60.0 * len(todo) / running if running > 0 else float("inf"),
+        )
+
+    _assemble(out, case, plan, jobs, part_file)
+    return out
+
+
+def _run_batches(runner, todo, batch_size, stop_after, partial, part_file, bar, check) -> bool:
+    """Simulate ``todo`` in batches, each trajectory saved to its part file as it is done;
+    False if stopped early by ``stop_after``."""
     try:
         for b, start in enumerate(range(0, len(todo), batch_size)):
             if stop_after is not None and b >= stop_after:
-                return out
+                return False
             batch = todo[start : start + batch_size]
             positions = runner([j[2] for j in batch], [j[3] for j in batch], batch_size)
             for (split, i, _, _), x in zip(batch, positions, strict=True):
-                _check_finite(x, split, i)
+                check(x, split, i)
                 tmp = partial / f"tmp_{split}_{i:05d}.npy"
                 np.save(tmp, x.astype(np.float32))
                 os.replace(tmp, part_file(split, i))
             bar.update(len(batch))
     finally:
         bar.close()
-    if timings is not None:
-        seconds = time.perf_counter() - started
-        timings.update(
-            trajectories=len(todo),
-            seconds=seconds,
-            per_minute=60.0 * len(todo) / seconds if seconds > 0 else float("inf"),
-        )
-
-    _assemble(out, case, plan, jobs, part_file)
-    return out
+    return True
 
 
 def _refuse_to_replace(out: Path, marker: Path, resume: bool) -> None:
