@@ -471,7 +471,7 @@ def test_cantilever_3d_young_modulus_recovered_by_calibrate():
     iterations; about 15 s).  The initial velocity follows E, as in the case."""
     import optax
 
-    from sphjax.calibrate import calibrate
+    from sphjax.calibration import calibrate
 
     case = sphjax.cases.cantilever_3d(n=2)
 
