@@ -154,7 +154,8 @@ class FramePlot:
     Args:
       trajectory: a :class:`~sphjax.Trajectory` (all frames drawn share the view and the
         colour range).
-      meta: the metadata of its file (case name and ``case_info`` are used).
+      meta: the metadata of its file (case name, ``case_info`` and, for the view of a 3D
+        trajectory, the gravity of its ``params`` are used).
       field: a State field; vectors are drawn by their magnitude, ``kind`` by type.
       frame_offset: the index of ``trajectory``'s first frame in its file (for the title).
       frame_numbers: the index in its file of each frame of ``trajectory`` (for the title;
@@ -166,6 +167,9 @@ class FramePlot:
     Raises:
       ValueError: ``field`` is not a State field (the message lists them), or a slice of
         a 2D trajectory.
+    Attributes:
+      axes: the coordinate axes drawn as the figure's horizontal and vertical axes, e.g.
+        ``(0, 2)`` for x and z.
     """
 
     def __init__(
