@@ -717,8 +717,8 @@ def cmd_dataset(args) -> int:
     compiling, per_minute = timings.get("compile_seconds", 0.0), timings.get("per_minute")
     rate = f"{per_minute:.3g}" if per_minute is not None and math.isfinite(per_minute) else "?"
     print(
-        f"wrote {out}: {n} trajectories simulated in {seconds:.1f} s wall "
-        f"({compiling:.1f} s compiling), {rate} trajectories per minute after compilation"
+        f"wrote {out}: {n} trajectories simulated in {seconds:.2f} s wall "
+        f"({compiling:.2f} s compiling), {rate} trajectories per minute after compilation"
     )
     return EXIT_OK
 
