@@ -20,7 +20,7 @@ import numpy as np  # noqa: E402
 import optax  # noqa: E402
 
 import sphjax  # noqa: E402
-from sphjax.calibrate import calibrate  # noqa: E402
+from sphjax.calibration import calibrate  # noqa: E402
 from sphjax.cases.fsi import hydrostatic_fsi_plate, midspan_deflection  # noqa: E402
 
 # --- parameters -------------------------------------------------------------------

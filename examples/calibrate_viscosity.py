@@ -25,7 +25,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import optax  # noqa: E402
 
 import sphjax  # noqa: E402
-from sphjax.calibrate import calibrate  # noqa: E402
+from sphjax.calibration import calibrate  # noqa: E402
 
 # --- parameters -------------------------------------------------------------------
 SMALL = os.environ.get("SPHJAX_SMALL", "0") == "1"

@@ -28,7 +28,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import optax  # noqa: E402
 
 import sphjax  # noqa: E402
-from sphjax.calibrate import calibrate  # noqa: E402
+from sphjax.calibration import calibrate  # noqa: E402
 from sphjax.observables import tip_displacement  # noqa: E402
 
 # --- parameters -------------------------------------------------------------------

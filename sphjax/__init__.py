@@ -22,8 +22,8 @@ apply_default_flags()  # before any JAX backend exists; see sphjax/_xla.py
 # The public names are imported on first use (PEP 562), so ``import sphjax`` and the
 # ``sphjax`` command's --help do not pay for importing JAX.
 _NAMES = {
-    "CalibrationResult": "sphjax.calibrate",
-    "calibrate": "sphjax.calibrate",
+    "CalibrationResult": "sphjax.calibration",
+    "calibrate": "sphjax.calibration",
     "Case": "sphjax.core.case",
     "Domain": "sphjax.core.model",
     "Model": "sphjax.core.model",

@@ -253,7 +253,8 @@ def _add_run(sub) -> None:
 
 _SLICE_HELP = (
     "3D trajectories: draw only the particles within one kernel support of a plane, e.g. "
-    "z=0.5 (default: the x-y projection)"
+    "z=0.5 (default: a side view, the vertical axis against gravity and the view along the "
+    "shorter horizontal extent, e.g. x-z for gravity along -z; x-y without gravity)"
 )
 
 
@@ -566,7 +567,7 @@ def cmd_plot(args) -> int:
     except ValueError as err:
         raise _plot_error(err) from None
     try:
-        figure.save(out)
+        figure.save(out, overwrite=args.overwrite)
     except OSError as err:
         raise UsageError("--out", f"cannot write '{out}': {err}") from None
     finally:
@@ -597,6 +598,7 @@ def cmd_animate(args) -> int:
         n = animate(
             trajectory, meta, args.field, out, fps=args.fps, progress=not args.quiet,
             frame_numbers=range(0, meta["n_frames"], args.every), slice_plane=plane,
+            overwrite=args.overwrite,
         )  # fmt: skip
     except ValueError as err:
         raise _plot_error(err) from None
@@ -626,7 +628,9 @@ def cmd_export(args) -> int:
     _trajectory_metadata(args.file)
     trajectory, meta = _read_frames(args.file)
     try:
-        pvd = export_vtk(trajectory, meta, folder, name=Path(args.file).stem)
+        pvd = export_vtk(
+            trajectory, meta, folder, name=Path(args.file).stem, overwrite=args.overwrite
+        )
     except OSError as err:
         raise UsageError("--vtk", f"cannot write into '{folder}': {err}") from None
     print(f"wrote {len(trajectory)} frames and {pvd}", file=sys.stderr)
@@ -705,14 +709,16 @@ def cmd_dataset(args) -> int:
         )
     except (ValueError, FileExistsError) as err:
         argument = "--dt" if args.dt is not None and "dt" in str(err) else "--out"
-        raise UsageError(argument, str(err)) from None
+        raise UsageError(argument, str(err).removeprefix("out: ")) from None
     except RuntimeError as err:  # a trajectory went unstable
         print(f"sphjax dataset: error: {err}", file=sys.stderr)
         return EXIT_UNSTABLE
     n, seconds = timings.get("trajectories", 0), timings.get("seconds", 0.0)
+    compiling, per_minute = timings.get("compile_seconds", 0.0), timings.get("per_minute")
+    rate = f"{per_minute:.3g}" if per_minute is not None and math.isfinite(per_minute) else "?"
     print(
-        f"wrote {out}: {n} trajectories simulated in {seconds:.1f} s "
-        f"({timings.get('per_minute', 0.0):.1f} trajectories per minute, compilation included)"
+        f"wrote {out}: {n} trajectories simulated in {seconds:.2f} s wall "
+        f"({compiling:.2f} s compiling), {rate} trajectories per minute after compilation"
     )
     return EXIT_OK
 

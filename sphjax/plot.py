@@ -6,8 +6,13 @@ all frames drawn), lengths are shown in m, mm or µm to keep the tick labels sho
 colour bar carries the field's SI unit (and a power of ten when the values are very small
 or large), ``kind`` is drawn with one colour per particle type and a legend, and a rigid
 cylinder recorded in the case information (Turek-Hron) is drawn as a disc.  A 3D
-trajectory is drawn as its x-y projection, or as a slice: the particles within one kernel
-support of a plane such as ``z = 0.5`` (:func:`parse_slice`), drawn in the plane's axes.
+trajectory is drawn as a side view when its run has gravity (the gravity recorded in the
+file's Params): a projection along one horizontal axis, the one along which the particles
+extend least (the second of the two when they extend equally), with the vertical axis
+upwards, so a 3D dam break with gravity along -z is drawn in x and z
+(:func:`projection_axes`).  Without gravity it is drawn as its x-y projection.  Or as a
+slice: the particles within one kernel support of a plane such as ``z = 0.5``
+(:func:`parse_slice`), drawn in the plane's axes.
 
     from sphjax.io import read_trajectory
     from sphjax.plot import FramePlot
@@ -68,6 +73,46 @@ def parse_slice(text: str) -> tuple[int, float]:
     return AXES.index(name), position
 
 
+def _gravity(meta: dict):
+    """The gravity vector recorded in a trajectory's metadata, or None."""
+    params = meta.get("params")
+    if params is None:
+        return None
+    try:
+        gravity = params["gravity"] if isinstance(params, dict) else params.gravity
+        gravity = np.asarray(gravity, dtype=float).reshape(-1)
+    except (AttributeError, KeyError, TypeError, ValueError):
+        return None
+    return gravity if gravity.size and np.all(np.isfinite(gravity)) else None
+
+
+def projection_axes(position, meta: dict) -> tuple[int, int, bool]:
+    """The two axes a 3D trajectory is drawn in by default, and whether the vertical one
+    points against its coordinate (gravity along ``+axis``).
+
+    With gravity (``meta["params"].gravity``, a run's Params as :func:`~sphjax.io.
+    read_trajectory` returns them): ``(horizontal, vertical, flipped)``, ``vertical`` the axis
+    along which gravity mostly acts, ``horizontal`` the one of the other two along which the
+    particles extend more (the first of the two when they extend equally), so the view
+    looks along the shortest horizontal extent.  Without gravity (zero, or not recorded, as
+    in files written before it was): ``(0, 1, False)``, the x-y projection.
+
+    Args:
+      position: ``[..., 3]`` particle positions (all frames drawn).
+      meta: the metadata of the trajectory's file.
+    """
+    gravity = _gravity(meta)
+    if gravity is None or gravity.shape != (3,) or not np.any(gravity != 0):
+        return 0, 1, False
+    vertical = int(np.argmax(np.abs(gravity)))
+    first, second = (a for a in range(3) if a != vertical)
+    points = np.asarray(position, dtype=float).reshape(-1, 3)
+    extent = points.max(axis=0) - points.min(axis=0)
+    tolerance = 1e-9 * max(float(extent.max()), 1e-300)
+    horizontal = second if extent[second] > extent[first] + tolerance else first
+    return horizontal, vertical, bool(gravity[vertical] > 0)
+
+
 def slice_half_width(meta: dict) -> float:
     """Half the thickness of a slice: the kernel support ``k h`` of the run's Model (two
     particle spacings if the file does not record it)."""
@@ -109,17 +154,22 @@ class FramePlot:
     Args:
       trajectory: a :class:`~sphjax.Trajectory` (all frames drawn share the view and the
         colour range).
-      meta: the metadata of its file (case name and ``case_info`` are used).
+      meta: the metadata of its file (case name, ``case_info`` and, for the view of a 3D
+        trajectory, the gravity of its ``params`` are used).
       field: a State field; vectors are drawn by their magnitude, ``kind`` by type.
       frame_offset: the index of ``trajectory``'s first frame in its file (for the title).
       frame_numbers: the index in its file of each frame of ``trajectory`` (for the title;
         default ``frame_offset + i``), e.g. ``range(0, n, 4)`` for every fourth frame.
-      slice_plane: ``None`` (3D: the x-y projection) or ``(axis, value)`` from
+      slice_plane: ``None`` (3D: a side view with gravity, else the x-y projection; see
+        :func:`projection_axes`) or ``(axis, value)`` from
         :func:`parse_slice`: only the particles within one kernel support of that plane
         are drawn, in the other two axes (3D trajectories only).
     Raises:
       ValueError: ``field`` is not a State field (the message lists them), or a slice of
         a 2D trajectory.
+    Attributes:
+      axes: the coordinate axes drawn as the figure's horizontal and vertical axes, e.g.
+        ``(0, 2)`` for x and z.
     """
 
     def __init__(
@@ -152,6 +202,7 @@ class FramePlot:
         self.kind = np.asarray(states.kind)
         info = meta.get("case_info", {}) or {}
         axes = [0, 1]
+        flipped = False
         self.visible = np.ones(position.shape[:-1], bool)
         self.slice_text = ""
         if slice_plane is not None:
@@ -169,7 +220,10 @@ class FramePlot:
                 )
             self.slice_text = f"  ({AXES[axis]} = {value:g} ± {half:.2g})"
         elif self.dim == 3:
-            self.slice_text = "  (x-y projection)"
+            horizontal, vertical, flipped = projection_axes(position, meta)
+            axes = [horizontal, vertical]
+            self.slice_text = f"  ({AXES[horizontal]}-{AXES[vertical]} projection)"
+        self.axes = tuple(axes) if self.dim > 1 else (0,)
         position = position[..., axes] if self.dim > 1 else position
 
         # view fitted to the particles over all frames, a couple of spacings of margin
@@ -203,6 +257,8 @@ class FramePlot:
         ax.set_aspect("equal")
         ax.set_xlim(lo[0] * scale, hi[0] * scale)
         ax.set_ylim(lo[1] * scale, hi[1] * scale)
+        if flipped:  # gravity along +axis: up is towards smaller values
+            ax.invert_yaxis()
         ax.xaxis.set_major_locator(ticker.MaxNLocator(nbins=6))
         ax.yaxis.set_major_locator(ticker.MaxNLocator(nbins=int(np.clip(round(8 * aspect), 3, 6))))
         ax.set_xlabel(f"{AXES[axes[0]]} [{length_unit}]")
@@ -304,7 +360,13 @@ class FramePlot:
             f"{self.slice_text}"
         )
 
-    def save(self, path) -> Path:
+    def save(self, path, *, overwrite: bool = False) -> Path:
+        """Write the figure to ``path`` (its suffix picks the format).  An existing file
+        raises :class:`FileExistsError` (``path: 'p.png' exists; pass overwrite=True ...``)
+        unless ``overwrite``."""
+        from sphjax._paths import check_new
+
+        check_new([path], "path", overwrite)
         self.fig.savefig(path, bbox_inches="tight", pad_inches=0.1)
         return Path(path)
 
@@ -324,20 +386,26 @@ def animate(
     progress=True,
     frame_numbers=None,
     slice_plane=None,
+    overwrite: bool = False,
 ) -> int:
     """Write every frame of ``trajectory`` coloured by ``field`` to a GIF or an MP4.
 
     GIFs are written with Pillow; MP4s (H.264) with the ffmpeg binary of the
     ``imageio-ffmpeg`` package.  ``frame_numbers``: see :class:`FramePlot`.  Returns the
-    number of frames written; ``slice_plane``: see :class:`FramePlot`.
+    number of frames written; ``slice_plane``: see :class:`FramePlot`.  An existing
+    ``path`` raises :class:`FileExistsError` (``path: 'a.gif' exists; pass overwrite=True
+    ...``) before any frame is drawn, unless ``overwrite``.
     """
     from matplotlib import animation
     from tqdm import tqdm
+
+    from sphjax._paths import check_new
 
     path = Path(path)
     suffix = path.suffix.lower()
     if suffix not in MOVIE_SUFFIXES:
         raise ValueError(f"unknown movie extension {suffix!r}; use .gif or .mp4")
+    check_new([path], "path", overwrite)
     plot = FramePlot(trajectory, meta, field, frame_numbers=frame_numbers, slice_plane=slice_plane)
     n = len(trajectory)
     if suffix == ".gif":

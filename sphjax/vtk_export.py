@@ -39,7 +39,9 @@ def point_data(state) -> dict[str, np.ndarray]:
     return out
 
 
-def export_vtk(trajectory, meta: dict | None, folder, name: str = "trajectory") -> Path:
+def export_vtk(
+    trajectory, meta: dict | None, folder, name: str = "trajectory", *, overwrite: bool = False
+) -> Path:
     """Write ``folder/<name>_<i>.vtu`` per frame and ``folder/<name>.pvd``; returns the pvd.
 
     Args:
@@ -47,13 +49,20 @@ def export_vtk(trajectory, meta: dict | None, folder, name: str = "trajectory") 
       meta: its metadata (unused today; kept for the case name in future formats).
       folder: output folder (created if missing).
       name: the stem of the file names.
+      overwrite: replace files of an earlier export; without it, a file this export would
+        write that exists already raises :class:`FileExistsError` (``folder: '...pvd'
+        exists; pass overwrite=True to replace it, ...``) before anything is written.
     """
     import meshio
 
+    from sphjax._paths import check_new
+
     folder = Path(folder)
-    folder.mkdir(parents=True, exist_ok=True)
     n = len(trajectory)
     width = max(4, len(str(n - 1)))
+    outputs = [folder / f"{name}.pvd", *(folder / f"{name}_{i:0{width}d}.vtu" for i in range(n))]
+    check_new(outputs, "folder", overwrite)
+    folder.mkdir(parents=True, exist_ok=True)
     times = np.asarray(trajectory.times, dtype=float)
     entries = []
     for i in range(n):

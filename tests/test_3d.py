@@ -471,7 +471,7 @@ def test_cantilever_3d_young_modulus_recovered_by_calibrate():
     iterations; about 15 s).  The initial velocity follows E, as in the case."""
     import optax
 
-    from sphjax.calibrate import calibrate
+    from sphjax.calibration import calibrate
 
     case = sphjax.cases.cantilever_3d(n=2)
 
@@ -495,3 +495,50 @@ def test_cantilever_3d_young_modulus_recovered_by_calibrate():
     )
     assert abs(result.values["young_modulus"] / 2.0e6 - 1) < 1e-4, result.values
     assert result.iterations <= 20
+
+
+def test_a_3d_run_with_gravity_is_drawn_from_the_side(tmp_path):
+    """Gravity along -z: the default view is the x-z projection with z upwards (the tank
+    extends equally in x and y, so y, the second, is the axis looked along); without
+    gravity, or in a file that does not record it, the x-y projection."""
+    import h5py
+
+    from sphjax.io import read_trajectory, write_trajectory
+    from sphjax.plot import FramePlot, projection_axes
+
+    case = sphjax.cases.hydrostatic_tank_3d(n=4)
+    assert np.asarray(case.params.gravity).tolist() == [0.0, 0.0, -9.81]
+    frames = jax.tree_util.tree_map(lambda a: a[None], case.state)
+    trajectory = sphjax.Trajectory(states=frames, times=np.zeros(1))
+    x = np.asarray(case.state.position)
+
+    def drawn(path):
+        figure = FramePlot(*read_trajectory(path), "kind")
+        out = (
+            figure.axes,
+            figure.ax.get_xlabel()[0] + figure.ax.get_ylabel()[0],
+            figure.title.get_text(),
+            figure.ax.yaxis_inverted(),
+            np.asarray(figure.points.get_offsets()),
+        )
+        figure.close()
+        return out
+
+    side = write_trajectory(tmp_path / "tank.h5", trajectory, case)
+    axes, labels, title, inverted, offsets = drawn(side)
+    assert axes == (0, 2) and labels == "xz" and "(x-z projection)" in title and not inverted
+    np.testing.assert_allclose(offsets, x[:, [0, 2]], rtol=1e-6)
+
+    still = case.params.replace(gravity=np.zeros(3))
+    top = write_trajectory(tmp_path / "still.h5", trajectory, case, params=still)
+    assert drawn(top)[:2] == ((0, 1), "xy") and "(x-y projection)" in drawn(top)[2]
+    with h5py.File(side, "a") as f:  # a file written before gravity was recorded
+        del f["params"]
+    assert drawn(side)[:2] == ((0, 1), "xy")
+
+    # the view is along the shorter horizontal extent; gravity along +axis turns it upside down
+    meta = {"params": case.params.replace(gravity=np.array([0.0, 9.81, 0.0]))}
+    assert projection_axes(x * np.array([1.0, 1.0, 3.0]), meta) == (2, 1, True)
+    assert projection_axes(x * np.array([3.0, 1.0, 1.0]), meta) == (0, 1, True)
+    assert projection_axes(x, {"params": case.params}) == (0, 2, False)
+    assert projection_axes(x * np.array([1.0, 2.0, 1.0]), {"params": case.params}) == (1, 2, False)

@@ -1,7 +1,8 @@
-"""Calibration (``sphjax.calibrate``): the loop itself on a closed-form model, and the
-cores of ``examples/calibrate_viscosity.py`` and ``examples/calibrate_youngs_modulus.py``
-at small sizes, asserting the recoveries of the gradients issue (nu within 2 % from 3x
-off; E within 1 % and nu within 5 % from E/2, nu = 0.3, 1 % noise, <= 100 iterations)."""
+"""Calibration (``sphjax.calibrate``, in ``sphjax.calibration``): the loop itself on a
+closed-form model, and the cores of ``examples/calibrate_viscosity.py`` and
+``examples/calibrate_youngs_modulus.py`` at small sizes, asserting the recoveries of the
+gradients issue (nu within 2 % from 3x off; E within 1 % and nu within 5 % from E/2,
+nu = 0.3, 1 % noise, <= 100 iterations)."""
 
 from __future__ import annotations
 
@@ -15,7 +16,7 @@ import pytest
 
 import sphjax
 from sphjax import make_params
-from sphjax.calibrate import calibrate, forward_value_and_grad, relative_misfit
+from sphjax.calibration import calibrate, forward_value_and_grad, relative_misfit
 
 EXAMPLES = pathlib.Path(__file__).resolve().parent.parent / "examples"
 
@@ -108,6 +109,19 @@ def test_forward_mode_gradient_equals_reverse_mode_through_a_simulation():
     for name in theta:
         assert abs(float(grad_r[name])) > 1e-6  # both derivatives are non-trivial
         assert float(grad_f[name]) == pytest.approx(float(grad_r[name]), rel=1e-9), name
+
+
+def test_sphjax_calibrate_is_the_function_whatever_was_imported_first():
+    """No module of ``sphjax`` is named like a name it exports: importing the module would
+    otherwise replace the exported name (``sphjax.calibrate`` was a module after
+    ``from sphjax.calibrate import ...`` and a function before it)."""
+    import pkgutil
+
+    import sphjax.calibration
+
+    assert sphjax.calibrate is sphjax.calibration.calibrate and callable(sphjax.calibrate)
+    clashes = [m.name for m in pkgutil.iter_modules(sphjax.__path__) if m.name in sphjax._NAMES]
+    assert not clashes, f"submodules named like a name sphjax exports: {clashes}"
 
 
 def test_relative_misfit():

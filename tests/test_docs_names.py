@@ -58,10 +58,7 @@ THIRD_PARTY = ("diffrax", "optax", "jax", "jax.sharding", "equinox")
 
 
 def _attribute(obj, name: str):
-    """``obj.name`` as a user who ran ``import sphjax`` gets it: ``sphjax.calibrate`` is the
-    function that ``sphjax`` exports, whatever imported the module ``sphjax.calibrate``."""
-    if obj is sphjax and name in sphjax._NAMES:
-        return getattr(importlib.import_module(sphjax._NAMES[name]), name)
+    """``obj.name``; a dataclass field without a default counts as present."""
     if not hasattr(obj, name) and name in getattr(obj, "__dataclass_fields__", {}):
         return None  # a dataclass field without a default (an instance attribute)
     return getattr(obj, name)

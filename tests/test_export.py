@@ -117,6 +117,56 @@ def test_export_vtk_round_trip(run, tmp_path, capsys):
     assert main(["export", str(path), "--vtk", str(folder), "--overwrite"]) == 0
 
 
+def test_python_writers_refuse_to_replace_an_output(run, tmp_path):
+    """``export_vtk``, ``FramePlot.save`` and ``animate`` refuse an existing output with one
+    FileExistsError line naming the path and ``overwrite=True``; with it they replace it."""
+    from sphjax.plot import FramePlot, animate
+    from sphjax.vtk_export import export_vtk
+
+    path, _ = run
+    trajectory, meta = read_trajectory(path)
+    folder = tmp_path / "vtk"
+    pvd = export_vtk(trajectory, meta, folder, name="db")
+    stamp = pvd.stat().st_mtime_ns
+    with pytest.raises(FileExistsError) as error:
+        export_vtk(trajectory, meta, folder, name="db")
+    assert str(error.value) == (
+        f"folder: '{pvd}' exists; pass overwrite=True to replace it, or choose another path"
+    )
+    assert pvd.stat().st_mtime_ns == stamp
+    (folder / "db_0003.vtu").unlink()  # any one file of the export is enough to refuse
+    pvd.unlink()
+    with pytest.raises(
+        FileExistsError, match=r"^folder: '.*db_0000\.vtu' exists; pass overwrite=True"
+    ):
+        export_vtk(trajectory, meta, folder, name="db")
+    assert not pvd.exists()
+    assert export_vtk(trajectory, meta, folder, name="db", overwrite=True) == pvd
+    assert export_vtk(trajectory, meta, folder, name="other") == folder / "other.pvd"
+
+    image = tmp_path / "p.png"
+    figure = FramePlot(trajectory, meta, "kind")
+    try:
+        figure.save(image)
+        assert image.read_bytes()[:4] == b"\x89PNG"
+        image.write_bytes(b"mine")
+        with pytest.raises(FileExistsError, match=r"^path: '.*p\.png' exists; pass overwrite=True"):
+            figure.save(image)
+        assert image.read_bytes() == b"mine"
+        figure.save(image, overwrite=True)
+        assert image.read_bytes()[:4] == b"\x89PNG"
+    finally:
+        figure.close()
+
+    movie = tmp_path / "m.gif"
+    movie.write_bytes(b"mine")
+    with pytest.raises(FileExistsError, match=r"^path: '.*m\.gif' exists; pass overwrite=True"):
+        animate(trajectory, meta, "kind", movie, progress=False)
+    assert movie.read_bytes() == b"mine"
+    assert animate(trajectory, meta, "kind", movie, progress=False, overwrite=True) == 4
+    assert movie.read_bytes()[:3] == b"GIF"
+
+
 def test_animate_gif_has_one_frame_per_saved_frame(run, tmp_path):
     from PIL import Image
 

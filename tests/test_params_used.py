@@ -225,3 +225,30 @@ def test_used_fields_change_the_right_hand_side(name):
 def test_every_field_is_in_the_table_or_used():
     """Every Params field appears: in no case is a field neither used nor refused."""
     assert set(fields()) == {"gravity", *FLUID_DEFAULTS, *SOLID_DEFAULTS}
+
+
+def test_the_whole_params_gradient_is_zero_for_unused_fields_and_says_which_are_used():
+    """``jax.grad`` with respect to the whole Params pytree: the fields the model does not
+    read get a gradient of exactly 0, the fields it reads do not; ``Params.used`` names the
+    latter, and the gradient (a Params with the same ``unused``) gives them alone with
+    ``items(used_only=True)``."""
+    case = _case("dam_break")
+    state = _perturbed_state(case)
+    neighbors = sphjax.build_neighbors(state, case.model)
+
+    def loss(params):
+        out = sphjax.evaluate(state, neighbors, case.model, params, density_step=case.dt)
+        return jnp.sum(out.acceleration**2) + jnp.sum(out.density_rate**2) * 1e-6
+
+    grads = jax.grad(loss)(case.params)
+    unused = [name for name, _ in case.params.unused]
+    assert case.params.used == tuple(n for n in _fields_of(case.params) if n not in unused)
+    assert set(unused) == set(MONAGHAN_WALLS) and "kinematic_viscosity" not in case.params.used
+    assert grads.unused == case.params.unused and grads.used == case.params.used
+    for name, value in grads.items():
+        if name in unused:
+            assert bool(jnp.all(value == 0.0)), f"{name}: gradient {value}, expected exactly 0"
+        else:
+            assert bool(jnp.any(value != 0.0)), f"{name} is read but its gradient is 0"
+    assert [name for name, _ in grads.items(used_only=True)] == list(case.params.used)
+    assert sphjax.make_params(2).used == tuple(_fields_of(sphjax.make_params(2)))

@@ -16,7 +16,15 @@ read (``parameters``); the Params of a :class:`~sphjax.Case` carry the fields it
 does not read as static metadata (:attr:`Params.unused`), and ``replace`` refuses to set
 one, concrete value or tracer alike, with one line that names the field, the system and
 the choice that would read it (:class:`UnusedParameterError`).  So a run never silently
-ignores a value, and ``jax.grad`` never silently returns 0 for a field no equation reads.
+ignores a value, and differentiating with respect to one field the model does not read
+(through ``replace``) fails with that line.
+
+Differentiating with respect to the whole Params pytree (``jax.grad(loss)(params)``) gives a
+Params of gradients in which the fields the model does not read are exactly 0: their
+leaves are in the pytree (so that one tree structure serves every model) but no equation
+reads them.  The gradient carries the same :attr:`Params.unused` as the Params it was
+taken at, so :attr:`Params.used` names the fields that mean something and
+``grads.items(used_only=True)`` gives only their gradients.
 """
 
 from __future__ import annotations
@@ -225,6 +233,14 @@ class Params:
         for group, values in grouped.items():
             top[group] = dataclasses.replace(object.__getattribute__(self, group), **values)
         return dataclasses.replace(self, **top)
+
+    @property
+    def used(self) -> tuple[str, ...]:
+        """The names of the fields the model reads, in field order: those not in
+        :attr:`unused` (every field present for Params built without a model, by
+        :func:`make_params`).  A gradient taken with respect to the whole Params is
+        meaningful for these fields only; the others' gradients are exactly 0."""
+        return tuple(name for name, _ in self.items(used_only=True))
 
     def items(self, used_only: bool = False):
         """``(name, value)`` of every field, flat (gravity first); with ``used_only``, of

@@ -28,6 +28,7 @@ import h5py
 import jax
 import numpy as np
 
+from sphjax._compile import CompileTimer
 from sphjax.core.case import Case
 from sphjax.dataset.format import FORMAT_VERSION, metadata, particle_types, statistics
 from sphjax.dataset.perturb import SPLITS, Perturbation, check_vary, initial_conditions
@@ -98,13 +99,18 @@ def generate_dataset(
       dt: solver step (default: the smallest stable step over all trajectories).
       batch_size: trajectories per compiled call (default 4 per device).
       resume: continue an interrupted folder (its ``INCOMPLETE`` plan must match).
-      overwrite: replace whatever ``out`` holds.
+      overwrite: replace whatever ``out`` holds; without it (and without ``resume``) a
+        folder that holds files raises :class:`FileExistsError` naming ``out`` and
+        ``overwrite=True``, before anything is simulated.
       progress: show a tqdm bar over trajectories.
       devices: JAX devices to shard over (default: all).
       case_kwargs: recorded in the metadata (how ``case`` was built).
       stop_after: stop after this many batches, leaving the folder incomplete (tests).
       timings: a dict filled with ``trajectories`` (simulated in this call), ``seconds``
-        (wall clock, compilation included) and ``per_minute`` (trajectories per minute).
+        (wall clock, compilation included), ``compile_seconds`` (of those, the time spent
+        tracing and compiling the batch program, or loading it from JAX's cache) and
+        ``per_minute`` (trajectories per minute after compilation: over ``seconds -
+        compile_seconds``).
     Returns:
       the dataset folder, or the incomplete folder if stopped early.
     """
@@ -125,6 +131,11 @@ def generate_dataset(
     perturbation = Perturbation((0.75, 1.25), 0.2) if perturbation is None else perturbation
     out = Path(out)
     marker, partial = out / MARKER, out / PARTIAL
+
+    if out.exists() and not out.is_dir():
+        raise FileExistsError(f"out: '{out}' is a file; give the name of a folder")
+    if out.exists() and any(out.iterdir()) and not overwrite:
+        _refuse_to_replace(out, marker, resume)  # before the initial conditions are built
 
     # the whole ensemble's initial conditions, deterministic per trajectory
     jobs = initial_conditions(case, counts, perturbation, vary, seed, case_kwargs or {})
@@ -151,13 +162,8 @@ def generate_dataset(
                     f"{out} holds an incomplete dataset made with other settings; resume it "
                     "with the same arguments, or pass overwrite=True (--overwrite)"
                 )
-        elif marker.exists():
-            raise FileExistsError(
-                f"{out} holds an incomplete dataset; pass resume=True (--resume) to continue it "
-                "or overwrite=True (--overwrite) to start afresh"
-            )
         else:
-            raise FileExistsError(f"{out} is not empty; choose another folder or overwrite")
+            _refuse_to_replace(out, marker, resume)
     try:
         partial.mkdir(parents=True, exist_ok=True)
     except OSError as error:
@@ -182,30 +188,61 @@ def generate_dataset(
         unit="traj",
         disable=not progress,
     )
+    with CompileTimer() as timer:
+        finished = _run_batches(
+            runner, todo, batch_size, stop_after, partial, part_file, bar, _check_finite
+        )
+    if not finished:
+        return out
+    if timings is not None:
+        seconds = time.perf_counter() - started
+        compiling = min(timer.seconds(started), seconds)
+        running = seconds - compiling
+        timings.update(
+            trajectories=len(todo),
+            seconds=seconds,
+            compile_seconds=compiling,
+            per_minute=60.0 * len(todo) / running if running > 0 else float("inf"),
+        )
+
+    _assemble(out, case, plan, jobs, part_file)
+    return out
+
+
+def _run_batches(runner, todo, batch_size, stop_after, partial, part_file, bar, check) -> bool:
+    """Simulate ``todo`` in batches, each trajectory saved to its part file as it is done;
+    False if stopped early by ``stop_after``."""
     try:
         for b, start in enumerate(range(0, len(todo), batch_size)):
             if stop_after is not None and b >= stop_after:
-                return out
+                return False
             batch = todo[start : start + batch_size]
             positions = runner([j[2] for j in batch], [j[3] for j in batch], batch_size)
             for (split, i, _, _), x in zip(batch, positions, strict=True):
-                _check_finite(x, split, i)
+                check(x, split, i)
                 tmp = partial / f"tmp_{split}_{i:05d}.npy"
                 np.save(tmp, x.astype(np.float32))
                 os.replace(tmp, part_file(split, i))
             bar.update(len(batch))
     finally:
         bar.close()
-    if timings is not None:
-        seconds = time.perf_counter() - started
-        timings.update(
-            trajectories=len(todo),
-            seconds=seconds,
-            per_minute=60.0 * len(todo) / seconds if seconds > 0 else float("inf"),
-        )
+    return True
 
-    _assemble(out, case, plan, jobs, part_file)
-    return out
+
+def _refuse_to_replace(out: Path, marker: Path, resume: bool) -> None:
+    """Raise FileExistsError for a folder ``out`` that holds files, unless it holds an
+    interrupted dataset (``marker``) and ``resume`` is asked for."""
+    if marker.exists() and resume:
+        return
+    if marker.exists():
+        raise FileExistsError(
+            f"out: '{out}' holds an incomplete dataset; pass resume=True to continue it "
+            "or overwrite=True to start afresh"
+        )
+    raise FileExistsError(
+        f"out: '{out}' is not empty; pass overwrite=True to replace what it holds, "
+        "or choose another folder"
+    )
 
 
 def _check_finite(x, split, i):
