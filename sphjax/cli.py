@@ -626,11 +626,9 @@ def cmd_export(args) -> int:
             "--vtk", f"cannot create '{folder}': '{folder.parent}' does not exist (mkdir -p it)"
         )
     _trajectory_metadata(args.file)
-    trajectory, meta = _read_frames(args.file)
+    trajectory, _ = _read_frames(args.file)
     try:
-        pvd = export_vtk(
-            trajectory, meta, folder, name=Path(args.file).stem, overwrite=args.overwrite
-        )
+        pvd = export_vtk(trajectory, folder, name=Path(args.file).stem, overwrite=args.overwrite)
     except OSError as err:
         raise UsageError("--vtk", f"cannot write into '{folder}': {err}") from None
     print(f"wrote {len(trajectory)} frames and {pvd}", file=sys.stderr)

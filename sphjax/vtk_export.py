@@ -39,14 +39,11 @@ def point_data(state) -> dict[str, np.ndarray]:
     return out
 
 
-def export_vtk(
-    trajectory, meta: dict | None, folder, name: str = "trajectory", *, overwrite: bool = False
-) -> Path:
+def export_vtk(trajectory, folder, name: str = "trajectory", *, overwrite: bool = False) -> Path:
     """Write ``folder/<name>_<i>.vtu`` per frame and ``folder/<name>.pvd``; returns the pvd.
 
     Args:
       trajectory: a :class:`~sphjax.Trajectory` (e.g. from :func:`sphjax.io.read_trajectory`).
-      meta: its metadata (unused today; kept for the case name in future formats).
       folder: output folder (created if missing).
       name: the stem of the file names.
       overwrite: replace files of an earlier export; without it, a file this export would

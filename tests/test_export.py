@@ -126,10 +126,10 @@ def test_python_writers_refuse_to_replace_an_output(run, tmp_path):
     path, _ = run
     trajectory, meta = read_trajectory(path)
     folder = tmp_path / "vtk"
-    pvd = export_vtk(trajectory, meta, folder, name="db")
+    pvd = export_vtk(trajectory, folder, name="db")
     stamp = pvd.stat().st_mtime_ns
     with pytest.raises(FileExistsError) as error:
-        export_vtk(trajectory, meta, folder, name="db")
+        export_vtk(trajectory, folder, name="db")
     assert str(error.value) == (
         f"folder: '{pvd}' exists; pass overwrite=True to replace it, or choose another path"
     )
@@ -139,10 +139,10 @@ def test_python_writers_refuse_to_replace_an_output(run, tmp_path):
     with pytest.raises(
         FileExistsError, match=r"^folder: '.*db_0000\.vtu' exists; pass overwrite=True"
     ):
-        export_vtk(trajectory, meta, folder, name="db")
+        export_vtk(trajectory, folder, name="db")
     assert not pvd.exists()
-    assert export_vtk(trajectory, meta, folder, name="db", overwrite=True) == pvd
-    assert export_vtk(trajectory, meta, folder, name="other") == folder / "other.pvd"
+    assert export_vtk(trajectory, folder, name="db", overwrite=True) == pvd
+    assert export_vtk(trajectory, folder, name="other") == folder / "other.pvd"
 
     image = tmp_path / "p.png"
     figure = FramePlot(trajectory, meta, "kind")
