@@ -64,7 +64,12 @@ def permute(tree, perm, axis: int = 0):
     n = perm.shape[0]
     leaves, treedef = jax.tree_util.tree_flatten(tree)
     which = [i for i, a in enumerate(leaves) if getattr(a, "ndim", 0) > axis and a.shape[axis] == n]
-    taken = _take([leaves[i] for i in which], jnp.asarray(perm), axis)
+    arrays = [leaves[i] for i in which]
+    traced = any(isinstance(a, jax.core.Tracer) for a in arrays)
+    if traced or jax.default_backend() != "cpu":
+        taken = _take(arrays, jnp.asarray(perm), axis)
+    else:  # concrete arrays in host memory: numpy, nothing to compile
+        taken = [jnp.asarray(np.take(np.asarray(a), perm, axis=axis)) for a in arrays]
     for i, a in zip(which, taken, strict=True):
         leaves[i] = a
     return jax.tree_util.tree_unflatten(treedef, leaves)
