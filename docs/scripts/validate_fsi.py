@@ -236,7 +236,7 @@ def obstacle(n, t_end, frames):
     ax[2].set(xlabel="t (s)", ylabel="kg m/s per m", title="horizontal momentum")
     ax[2].legend(fontsize=7)
     fig.tight_layout()
-    fig.savefig(FIGURES / "fsi_obstacle.png", dpi=110)
+    fig.savefig(FIGURES / ("fsi_obstacle.png" if n == 2 else f"fsi_obstacle_n{n}.png"), dpi=110)
     return row
 
 
