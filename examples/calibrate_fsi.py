@@ -57,9 +57,7 @@ def observe(case, n_steps=N_STEPS, save_every=SAVE_EVERY, noise=NOISE, seed=SEED
 
 
 def run(n=N, max_iterations=MAX_ITERATIONS, seed=SEED, verbose=True, n_steps=N_STEPS):
-    case = hydrostatic_fsi_plate(
-        n=n, length=LENGTH, depth=DEPTH, young_modulus=TRUE_E, substeps=1
-    )
+    case = hydrostatic_fsi_plate(n=n, length=LENGTH, depth=DEPTH, young_modulus=TRUE_E, substeps=1)
     observables, observed = observe(case, n_steps=n_steps, seed=seed)
     result = calibrate(
         observables,

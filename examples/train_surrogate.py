@@ -116,6 +116,9 @@ def main(argv=None) -> dict:
     parser.add_argument("--out", type=Path, default=Path("runs/surrogate"))
     parser.add_argument("--seconds", type=float, default=TRAIN_SECONDS, help="training budget")
     parser.add_argument("--steps", type=int, default=None, help="training steps (optional cap)")
+    parser.add_argument(
+        "--overwrite", action="store_true", help="replace the weights of an earlier run in --out"
+    )
     args = parser.parse_args(argv)
     out = args.out
     out.mkdir(parents=True, exist_ok=True)
@@ -144,7 +147,7 @@ def main(argv=None) -> dict:
         eval_rollout=ROLLOUT_STEPS,
     )
     print(f"trained {result.steps} steps in {result.seconds:.0f} s")
-    sim.save(result.model, out / "gns.eqx")
+    sim.save(result.model, out / "gns.eqx", overwrite=args.overwrite)
 
     t0 = time.perf_counter()
     surrogate = rollout_metrics(sim, result.model, test_set, ROLLOUT_STEPS, report=REPORT)

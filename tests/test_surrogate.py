@@ -133,6 +133,9 @@ def test_trained_rollout_shapes_finite_and_sensible(dataset, tmp_path):
         assert m["n_rollouts"] == len(test_set) and m["lb_sinkhorn"] >= 0
     # saved weights give the same rollout
     sim.save(model, tmp_path / "gns.eqx")
+    with pytest.raises(FileExistsError, match=r"^path: '.*gns\.eqx' exists; pass overwrite=True"):
+        sim.save(model, tmp_path / "gns.eqx")  # one overwrite rule, as every writer
+    sim.save(model, tmp_path / "gns.eqx", overwrite=True)
     sim2, model2 = LearnedSimulator.load(tmp_path / "gns.eqx")
     frames2, _ = sim2.rollout(model2, x0, types, n_steps, sim2.allocate(x0[-1]))
     np.testing.assert_allclose(np.asarray(frames2), np.asarray(frames), atol=1e-6)

@@ -261,7 +261,7 @@ def gns_stage(args, work: Path, figures: Path) -> dict:
     plot_mse(metrics, figures / "tg_rollout_mse.png")
     plot_rollout(sim, runs["gns"].model, test_set, figures / "tg_rollout.png", n_steps)
     if args.write_model:
-        sim.save(runs["gns"].model, DOCS / "models" / "tg32_gns.eqx")
+        sim.save(runs["gns"].model, DOCS / "models" / "tg32_gns.eqx", overwrite=True)
     base = metrics["constant velocity"]
     print("| metric | " + " | ".join(metrics) + " | GNS / const. velocity |")
     print("|---|" + "---:|" * (len(metrics) + 1))

@@ -227,9 +227,16 @@ class LearnedSimulator:
 
     # ------------------------------------------------------------------ saving
 
-    def save(self, model: GNS, path) -> None:
-        """Weights to ``path`` (equinox serialisation) and settings to ``path.json``."""
+    def save(self, model: GNS, path, *, overwrite: bool = False) -> None:
+        """Weights to ``path`` (equinox serialisation) and settings to ``path.json``.
+
+        An existing ``path`` or ``path.json`` raises :class:`FileExistsError` (``path: '...'
+        exists; pass overwrite=True to replace it, ...``) before anything is written;
+        ``overwrite=True`` replaces them."""
+        from sphjax._paths import check_new
+
         path = Path(path)
+        check_new([path, path.with_suffix(path.suffix + ".json")], "path", overwrite)
         path.parent.mkdir(parents=True, exist_ok=True)
         eqx.tree_serialise_leaves(path, model)
         floats = [a.dtype for a in jax.tree_util.tree_leaves(model) if _is_float(a)]
