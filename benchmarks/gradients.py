@@ -6,7 +6,9 @@ For a Taylor-Green vortex of ``n_side**2`` particles (float32 by default) this m
   ``loss = kinetic energy after n_steps`` w.r.t. the viscosity, both ``jax.jit``-compiled,
   compile time excluded (best of ``--repeat``);
 * peak resident memory (``ru_maxrss``) of a fresh subprocess per configuration, with and
-  without ``checkpoint_every``;
+  without ``checkpoint_every``, and XLA's temporary memory of the compiled derivative
+  (``memory_analysis().temp_size_in_bytes``: what the program holds at its peak, the
+  stored carries included, without the compiler's own memory);
 * with ``--forward-mode``, the same derivative in forward mode (``jax.jacfwd``: one
   tangent through the scan, nothing stored), the cheaper route for a few parameters;
 * with ``--autodiff-steps``, reverse mode with JAX's own transpose of the pair sums
@@ -94,6 +96,11 @@ def run_one(
         t0 = time.perf_counter()
         compiled = jax.jit(fn).lower(nu).compile()
         out[f"{name}_compile_s"] = time.perf_counter() - t0
+        # XLA's buffer assignment: the temporaries the compiled program holds at its peak
+        # (what reverse mode stores included; compilation's own memory is not in it)
+        stats = compiled.memory_analysis()
+        if stats is not None:
+            out[f"{name}_temp_mb"] = stats.temp_size_in_bytes / 2**20
         best, best_cpu = math.inf, math.inf
         for _ in range(repeat):
             t0, c0 = time.perf_counter(), time.process_time()
@@ -174,7 +181,7 @@ def main(argv=None):
 
     header = (
         f"{'case':>12} {'steps':>6} {'mode':>8} {'ckpt':>5} {'particles':>9} {'fwd s':>8} "
-        f"{'grad s':>8} {'grad/fwd':>8} {'per CPU-s':>9} {'peak RSS MB':>11}"
+        f"{'grad s':>8} {'grad/fwd':>8} {'per CPU-s':>9} {'peak RSS MB':>11} {'temp MB':>8}"
     )
     print(header, flush=True)
     for mode, n_steps, checkpoint in _configurations(args):
@@ -190,7 +197,8 @@ def main(argv=None):
         r = json.loads(proc.stdout.strip().splitlines()[-1])
         print(
             f"{label} {r['particles']:>9} {r['forward_s']:>8.2f} {r['grad_s']:>8.2f} "
-            f"{r['ratio']:>8.2f} {r['ratio_cpu']:>9.2f} {r['peak_rss_mb']:>11.0f}",
+            f"{r['ratio']:>8.2f} {r['ratio_cpu']:>9.2f} {r['peak_rss_mb']:>11.0f} "
+            f"{r.get('grad_temp_mb', float('nan')):>8.1f}",
             flush=True,
         )
         if args.json:

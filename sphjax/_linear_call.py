@@ -135,8 +135,11 @@ def custom_adjoint(fun: Callable, adjoint: Callable, n_linear: int) -> Callable:
     Args:
       fun: the function; its first ``n_linear`` arguments are differentiable (floating
         point), the rest (e.g. integer neighbour indices) are not.
-      adjoint: ``adjoint(args, cotangent) -> tuple`` of cotangents of the first
-        ``n_linear`` arguments, ``args`` being all arguments of ``fun``.
+      adjoint: ``adjoint(args, cotangent, active) -> tuple`` of cotangents of the first
+        ``n_linear`` arguments, ``args`` being all arguments of ``fun`` and ``active``
+        a tuple of ``n_linear`` booleans, False for an argument whose tangent is a
+        symbolic zero (not differentiated): its cotangent is not used and may be
+        ``None``, so the adjoint can skip computing it.
       n_linear: number of differentiable leading arguments.
     Returns:
       ``fun`` with the adjoint attached, or ``fun`` itself where the JAX version does not
@@ -165,7 +168,7 @@ def custom_adjoint(fun: Callable, adjoint: Callable, n_linear: int) -> Callable:
             return jax.jvp(lambda *x: fun(*x, *rest), args[:n_linear], tuple(full))[1]
 
         def transpose(args, cotangent):
-            bars = adjoint(args, cotangent)
+            bars = adjoint(args, cotangent, tuple(active))
             return tuple(b for b, a in zip(bars, active, strict=True) if a)
 
         linear = tuple(t for t, a in zip(tangents[:n_linear], active, strict=True) if a)

@@ -426,7 +426,7 @@ def test_custom_adjoint_falls_back_to_autodiff_on_an_untested_jax(monkeypatch):
     def fun(x):
         return jnp.sin(x)
 
-    def adjoint(args, cotangent):
+    def adjoint(args, cotangent, active):
         raise AssertionError("the custom adjoint must not be used on an untested JAX")
 
     monkeypatch.setattr(_linear_call, "TESTED_JAX", ())

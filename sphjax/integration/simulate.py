@@ -109,9 +109,36 @@ def unhealthy(state: State, model: Model):
     return ~finite | outside
 
 
-def _step_with_checks(carry, dt, model, params):
+def _split_fixed(neighbors: Neighbors, model: Model):
+    """``(fixed, rest)``: the part of ``neighbors`` that no step changes (the solids'
+    reference quantities and their reference-configuration lists), or ``None``, and the
+    rest."""
+    keys = [
+        k for k in neighbors.pairs if k[0] == k[1] and not model.systems[k[0]].current_configuration
+    ]
+    if neighbors.reference is None and not keys:
+        return None, neighbors
+    fixed = (neighbors.reference, {k: neighbors.pairs[k] for k in keys})
+    pairs = {k: v for k, v in neighbors.pairs.items() if k not in keys}
+    return fixed, neighbors.replace(reference=None, pairs=pairs)
+
+
+def _join_fixed(neighbors: Neighbors, fixed) -> Neighbors:
+    """:func:`_split_fixed` undone."""
+    reference, pairs = fixed
+    return neighbors.replace(reference=reference, pairs={**neighbors.pairs, **pairs})
+
+
+def _step_with_checks(carry, dt, model, params, fixed=None):
+    """One step and its health check.  ``fixed``: the part of the neighbours that no step
+    changes (:func:`_split_fixed`) when the carry goes without it: a scan then closes over
+    it instead of carrying it, so reverse mode keeps it once, not once per stored carry."""
     state, neighbors, failure, step = carry
+    if fixed is not None:
+        neighbors = _join_fixed(neighbors, fixed)
     state, neighbors = kick_drift_kick(state, neighbors, dt, model, params)
+    if fixed is not None:
+        neighbors = _split_fixed(neighbors, model)[1]
     step = step + 1
     bad = unhealthy(state, model)
     record = (failure[0] < 0) & jnp.any(bad)
@@ -154,10 +181,11 @@ def _run_steps(carry, n_steps: int, checkpoint_every: int | None, step_fn):
     return carry
 
 
-def _run_frames(carry, dt, params, *, model, save_every, n_frames, checkpoint_every):
+def _run_frames(carry, dt, params, *, model, save_every, n_frames, checkpoint_every, fixed=None):
     """``n_frames`` frames of ``save_every`` steps from ``carry = (state, neighbors,
-    failure, step)``; returns the last carry and the frames' States."""
-    step_fn = functools.partial(_step_with_checks, dt=dt, model=model, params=params)
+    failure, step)``; returns the last carry and the frames' States.  ``fixed``: see
+    :func:`_step_with_checks`."""
+    step_fn = functools.partial(_step_with_checks, dt=dt, model=model, params=params, fixed=fixed)
 
     def frame(carry, _):
         carry = _run_steps(carry, save_every, checkpoint_every, step_fn)
@@ -398,6 +426,9 @@ def _simulate_traced(state, neighbors, dt, params, model, *, segments, checkpoin
     one first."""
     neighbors = update_neighbors(state.position, neighbors, model, rebuild=True)
     state = evaluate(state, neighbors, model, params)
+    # what no step changes (a solid's reference list and quantities) stays out of the
+    # scans' carry: reverse mode then keeps it once, not once per step or chunk
+    fixed, neighbors = _split_fixed(neighbors, model)
     carry, all_frames = _initial_carry(state, neighbors), [_expand(state)]
     for save_every, n_frames in segments:
         carry, frames = _run_frames(
@@ -408,6 +439,7 @@ def _simulate_traced(state, neighbors, dt, params, model, *, segments, checkpoin
             save_every=save_every,
             n_frames=n_frames,
             checkpoint_every=checkpoint_every,
+            fixed=fixed,
         )
         all_frames.append(frames)
     jax.debug.callback(_raise_overflow, overflowed(carry[1]))

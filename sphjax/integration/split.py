@@ -41,7 +41,7 @@ from sphjax.core.state import Kind, State
 from sphjax.integration import step as kdk
 from sphjax.physics.interactions import INTERACTIONS
 from sphjax.physics.pairs import Geometry
-from sphjax.physics.rhs import Context, evaluate, update_neighbors
+from sphjax.physics.rhs import Context, evaluate, reference_pairs, update_neighbors
 from sphjax.physics.solid.system import SolidSystem, update_solid
 
 _PER_PARTICLE = (
@@ -70,9 +70,11 @@ def _block(state: State, s: slice) -> State:
     return state.replace(**{name: getattr(state, name)[s] for name in _PER_PARTICLE})
 
 
-def fast_acceleration(solid: State, system: SolidSystem, pairs, ctx):
+def fast_acceleration(solid: State, system: SolidSystem, pairs, ctx, reference=None):
     """``a_fast``: the solid's elastic acceleration (eq. 14 without the fluid's force) plus
-    gravity, zero on clamped particles; ``solid`` holds the solid's block only."""
+    gravity, zero on clamped particles; ``solid`` holds the solid's block only.
+    ``reference``: the solid's reference quantities (``L0``), or ``None`` (computed
+    here)."""
     view = {
         "x": solid.position,
         "v": solid.velocity,
@@ -82,7 +84,7 @@ def fast_acceleration(solid: State, system: SolidSystem, pairs, ctx):
         "V": solid.volume,
         "free": solid.kind == Kind.SOLID,
     }
-    view = update_solid(system, view, pairs, ctx)
+    view = update_solid(system, view, pairs, ctx, reference)
     elastic = INTERACTIONS[(SolidSystem, SolidSystem)](system, view, system, view, pairs, ctx)
     a = elastic["a"] + ctx.params.gravity
     return jnp.where(view["free"][:, None], a, 0.0)
@@ -94,11 +96,13 @@ def kick_drift_kick(state: State, neighbors, dt, model, params):
     i = next(k for k, s in enumerate(model.systems) if isinstance(s, SolidSystem))
     system = model.systems[i]
     s = slice(*neighbors.blocks[i])
-    pairs = neighbors.pairs[(i, i)]
+    # the solid's list with its reference geometry, and its L0: computed once per run
+    pairs = reference_pairs(neighbors)[(i, i)]
+    reference = (neighbors.reference or {}).get(i)
     ctx = Context(params, Geometry.of(model), model.pair_adjoint, model.pair_block)
 
     def with_fast(solid):
-        return solid.replace(acceleration=fast_acceleration(solid, system, pairs, ctx))
+        return solid.replace(acceleration=fast_acceleration(solid, system, pairs, ctx, reference))
 
     def coupling_kick(solid, slow):
         free = (solid.kind == Kind.SOLID)[:, None]

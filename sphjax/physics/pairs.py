@@ -183,6 +183,11 @@ class PairList:
         the wall, so the sum costs ``M`` rows, not ``n_rows``.
       transpose_members: ``None``, or ``[M']`` the columns the rows of ``transpose`` are
         (padded with ``n_cols``).
+      geometry: ``None``, or the :class:`PairGeometry` (``[n_rows, K, ...]``) of a list
+        within one system whose positions ``rows["x"]`` never change (a solid's
+        reference configuration): computed once per run (:func:`stored_geometry`), pair
+        sums over the list read it instead of computing it at every evaluation, and
+        reverse mode returns its cotangent (to the positions it was computed from).
     """
 
     idx: jax.Array
@@ -191,6 +196,16 @@ class PairList:
     n_cols: int
     members: jax.Array | None = None
     transpose_members: jax.Array | None = None
+    geometry: PairGeometry | None = None
+
+
+def stored_geometry(x, pairs: PairList, geometry: Geometry) -> PairGeometry:
+    """The :class:`PairGeometry` of the list ``pairs`` within one system at positions
+    ``x`` (``[n, d]``), per neighbour slot (``[n, K, ...]``): what
+    :attr:`PairList.geometry` holds.  Differentiable in ``x``."""
+    valid = pairs.idx < x.shape[0]
+    x_b = x[jnp.where(valid, pairs.idx, 0)]
+    return geometry.pairs(x[:, None], x_b, valid)
 
 
 def define_pullback(summand: Callable, pullback: Callable) -> None:
@@ -317,18 +332,20 @@ def _reduce_pairs(per_pair, shape):
 
 def _row_and_shared_sums(a_bar, dr_bar, s_bar, fields, shared, shape):
     """The per-pair cotangents of a block of rows summed in one reduction: those of the
-    rows' ``fields`` (``a_bar``, plus ``dr_bar`` for ``x``) over the neighbours, those of
-    the ``shared`` leaves over the block's pairs."""
+    rows' ``fields`` (``a_bar``, plus ``dr_bar`` for ``x`` unless it is ``None``) over the
+    neighbours, those of the ``shared`` leaves over the block's pairs."""
     keys = [k for k in fields if k in a_bar]
     s_leaves, s_def = jax.tree_util.tree_flatten(shared)
     s_items = [(i, b) for i, b in enumerate(s_bar) if not _is_zero(b)]
-    sums = _reduce_pairs([a_bar[k] for k in keys] + [dr_bar] + [b for _, b in s_items], shape)
+    with_dr = [] if dr_bar is None else [dr_bar]
+    sums = _reduce_pairs([a_bar[k] for k in keys] + with_dr + [b for _, b in s_items], shape)
     out = {k: jnp.zeros_like(v) for k, v in fields.items()}
     for k, total in zip(keys, sums, strict=False):
         out[k] = total.astype(fields[k].dtype).reshape(fields[k].shape)
-    out["x"] = out["x"] + sums[len(keys)]
+    if dr_bar is not None:
+        out["x"] = out["x"] + sums[len(keys)]
     shared_sums = [jnp.zeros(jnp.shape(s), jnp.result_type(s)) for s in s_leaves]
-    for (i, _), total in zip(s_items, sums[len(keys) + 1 :], strict=True):
+    for (i, _), total in zip(s_items, sums[len(keys) + len(with_dr) :], strict=True):
         shared_sums[i] = jnp.sum(total, axis=0).astype(jnp.result_type(s_leaves[i]))
     return out, jax.tree_util.tree_unflatten(s_def, shared_sums)
 
@@ -426,18 +443,20 @@ def _scale(out, factor):
     return tree_map(one, out)
 
 
-def _forward(f, geometry, block, rows, cols, shared, idx):
+def _forward(f, geometry, block, rows, cols, shared, idx, stored=None):
+    """The pair sum itself; ``stored``: the list's :attr:`PairList.geometry` (else the
+    geometry is computed from the positions)."""
     n_cols = jax.tree_util.tree_leaves(cols)[0].shape[0]
 
     def one_block(args):
-        rows_k, idx_k = args
+        rows_k, idx_k, stored_k = args
         valid = idx_k < n_cols
         b = _gather(cols, jnp.where(valid, idx_k, 0))
         a = _row_view(rows_k)
-        pair = geometry.pairs(a["x"], b["x"], valid)
+        pair = geometry.pairs(a["x"], b["x"], valid) if stored_k is None else stored_k
         return _sum_pairs(_masked(f(pair, a, b, shared), pair.mask))
 
-    return _rowwise(one_block, (rows, idx), block, n_cols)
+    return _rowwise(one_block, (rows, idx, stored), block, n_cols)
 
 
 def _per_pair(fields, shape):
@@ -449,7 +468,20 @@ def _sum_over_pairs(tree):
     return tree_map(lambda q: jnp.sum(q, axis=1), tree)
 
 
-def _adjoint_self(f, weight, parity, geometry, block, fields, shared, idx, obar):
+def _adjoint_self(
+    f,
+    weight,
+    parity,
+    geometry,
+    block,
+    fields,
+    shared,
+    idx,
+    obar,
+    stored=None,
+    stored_bar=False,
+    active=None,
+):
     """Cotangents of ``fields`` and ``shared`` for a sum ``w_b f(a, b)`` within one system:
     both roles of each particle ``k`` in one pass over its own row.
 
@@ -467,8 +499,22 @@ def _adjoint_self(f, weight, parity, geometry, block, fields, shared, idx, obar)
     The pair geometry's own derivative (``r``, ``W`` and ``grad W`` as functions of
     ``r_kb``) is :meth:`Geometry.pullback`, written once; ``x_k`` enters through ``r_kb``
     only.
+
+    With ``stored`` (the list's :attr:`PairList.geometry`) the pair geometry is read, not
+    computed, and ``x`` gets no cotangent from the sum; with ``stored_bar`` the cotangent
+    of the stored geometry is returned as well, per slot: a pair appears in two slots
+    (``(k, b)`` and ``(b, k)``, the same geometry swapped) and the pass over ``k``'s row
+    gives the cotangent of both roles, so each slot gets half of it.  Returns
+    ``(fields_bar, shared_bar, stored geometry's (dr, r, w, grad_w) bars or None)``.
+
+    ``active``: ``None``, or ``(fields, shared)`` the keys of ``fields`` and the indices of
+    the leaves of ``shared`` whose cotangents are wanted; the hand-written path then
+    leaves the others out of its one reduction (zeros are returned for them), where XLA
+    would not drop them itself.
     """
     n = jax.tree_util.tree_leaves(fields)[0].shape[0]
+    wanted_fields = set(fields) if active is None else set(active[0])
+    wanted_shared = None if active is None else set(active[1])
     full = _weighted(f, weight)
 
     def both_roles(pair, a, b, s):
@@ -493,7 +539,7 @@ def _adjoint_self(f, weight, parity, geometry, block, fields, shared, idx, obar)
                 pair.mask,
             )
             pair_bar, a_bar, _, s_bar = hand(pair, a, b, s, bar)
-            if weight is not None:
+            if weight is not None and weight in wanted_fields:
                 term = _masked(f(pair, a, b, s), pair.mask)
                 a_bar = {**a_bar, weight: a_bar.get(weight, 0.0) + parity * _contract(term, obar_b)}
             return pair_bar, a_bar, [0.5 * q for q in s_bar]
@@ -507,25 +553,52 @@ def _adjoint_self(f, weight, parity, geometry, block, fields, shared, idx, obar)
         pair_bar = (dr1 - dr2, r1 + r2, w1 + w2, g1 - g2)
         a_bar = dict(a_bar)
         Cotangents._add(a_bar, a_as_b)
-        if weight is not None:
+        if weight is not None and weight in wanted_fields:
             term = _masked(f(swapped, b, a, s), pair.mask)
             a_bar[weight] = a_bar.get(weight, 0.0) + _contract(term, obar_b)
         return pair_bar, a_bar, s_bar
 
+    def wanted(a_bar, s_bar):
+        """Only the cotangents asked for (``active``)."""
+        a_bar = {k: v for k, v in a_bar.items() if k in wanted_fields}
+        if wanted_shared is not None:
+            s_bar = [q if i in wanted_shared else 0.0 for i, q in enumerate(s_bar)]
+        return a_bar, s_bar
+
+    def halved(pair_bar, pair):
+        """Each slot's half of the cotangent of the stored geometry (see above)."""
+        bars = _with_mask(pair_bar, pair.mask)
+        return tuple(
+            jnp.zeros_like(q) if _is_zero(q_bar) else 0.5 * jnp.broadcast_to(q_bar, q.shape)
+            for q, q_bar in zip(_without_mask(pair), _without_mask(bars), strict=True)
+        )
+
     def one_block(args):
-        fields_k, idx_k, obar_k = args
+        fields_k, idx_k, obar_k, stored_k = args
         valid = idx_k < n
         j = jnp.where(valid, idx_k, 0)
         b = _gather(fields, j)
         a = _per_pair(fields_k, idx_k.shape)
-        dr = geometry.displacement(a["x"], b["x"])
-        pair, factors = geometry._pairs_and_factors(dr, valid, second=True)
+        if stored_k is None:
+            dr = geometry.displacement(a["x"], b["x"])
+            pair, factors = geometry._pairs_and_factors(dr, valid, second=True)
+        else:
+            pair, factors = stored_k, None
         if hand is not None:
             pair_bar, a_bar, s_bar = by_hand(
                 pair, a, b, shared, _per_pair(obar_k, idx_k.shape), _gather(obar, j)
             )
-            dr_bar = Geometry.pullback(pair, factors, _with_mask(pair_bar, pair.mask))
-            return _row_and_shared_sums(a_bar, dr_bar, s_bar, fields_k, shared, idx_k.shape)
+            a_bar, s_bar = wanted(a_bar, s_bar)
+            if stored_k is not None:
+                sums, s_sums = _row_and_shared_sums(
+                    a_bar, None, s_bar, fields_k, shared, idx_k.shape
+                )
+                return (sums, halved(pair_bar, pair) if stored_bar else None), s_sums
+            dr_bar = None
+            if "x" in wanted_fields:
+                dr_bar = Geometry.pullback(pair, factors, _with_mask(pair_bar, pair.mask))
+            sums, s_sums = _row_and_shared_sums(a_bar, dr_bar, s_bar, fields_k, shared, idx_k.shape)
+            return (sums, None), s_sums
         _, pull = jax.vjp(
             lambda p, a, s: both_roles(_with_mask(p, pair.mask), a, b, s),
             _without_mask(pair),
@@ -533,14 +606,19 @@ def _adjoint_self(f, weight, parity, geometry, block, fields, shared, idx, obar)
             shared,
         )
         pair_bar, a_bar, s_bar = pull((_per_pair(obar_k, idx_k.shape), _gather(obar, j)))
-        dr_bar = Geometry.pullback(pair, factors, _with_mask(pair_bar, pair.mask))
         a_bar = _sum_over_pairs(a_bar)
-        a_bar["x"] = a_bar["x"] + jnp.sum(dr_bar, axis=1)
         if parity is not None:
             s_bar = tree_map(lambda q: 0.5 * q, s_bar)
-        return a_bar, s_bar
+        if stored_k is not None:
+            return (a_bar, halved(pair_bar, pair) if stored_bar else None), s_bar
+        dr_bar = Geometry.pullback(pair, factors, _with_mask(pair_bar, pair.mask))
+        a_bar["x"] = a_bar["x"] + jnp.sum(dr_bar, axis=1)
+        return (a_bar, None), s_bar
 
-    return _rowwise_with_shared(one_block, (fields, idx, obar), block, n)
+    (fields_bar, stored_bars), shared_bar = _rowwise_with_shared(
+        one_block, (fields, idx, obar, stored), block, n
+    )
+    return fields_bar, shared_bar, stored_bars
 
 
 def _rowwise_with_shared(one_block, rows, block, pad_index):
@@ -632,8 +710,11 @@ def _adjoint_cross(
     return rows_bar, cols_bar, shared_bar
 
 
-def _custom_sum(f, geometry, block, structure, same, weight=None, parity=None, compact=False):
-    """The pair sum of ``f`` with its adjoint attached."""
+def _custom_sum(
+    f, geometry, block, structure, same, weight=None, parity=None, compact=False, stores=False
+):
+    """The pair sum of ``f`` with its adjoint attached; ``stores``: the list carries its
+    geometry (:attr:`PairList.geometry`), passed after the shared leaves."""
     rows_def, cols_def, shared_def, n_rows_leaves, n_cols_leaves, n_shared = structure
 
     def unflatten(flat):
@@ -645,29 +726,56 @@ def _custom_sum(f, geometry, block, structure, same, weight=None, parity=None, c
             cols = jax.tree_util.tree_unflatten(cols_def, flat[k : k + n_cols_leaves])
             k += n_cols_leaves
         shared = jax.tree_util.tree_unflatten(shared_def, flat[k : k + n_shared])
-        return rows, cols, shared, flat[k + n_shared :]
+        k += n_shared
+        if not stores:
+            return rows, cols, shared, None, flat[k:]
+        # the stored geometry: its four float fields, then (after the integer arrays) its mask
+        rest = flat[k + 4 :]
+        stored = _with_mask(flat[k : k + 4], rest[-1])
+        return rows, cols, shared, stored, rest[:-1]
 
     full = _weighted(f, weight)
 
     def forward(*flat):
-        rows, cols, shared, (idx, *_) = unflatten(flat)
-        return _forward(full, geometry, None, rows, cols, shared, idx)
+        rows, cols, shared, stored, (idx, *_) = unflatten(flat)
+        return _forward(full, geometry, None, rows, cols, shared, idx, stored)
 
-    def adjoint(flat, obar):
-        rows, cols, shared, (idx, *transpose) = unflatten(flat)
+    def adjoint(flat, obar, active):
+        rows, cols, shared, stored, (idx, *transpose) = unflatten(flat)
         members = transpose[1] if compact else None
         leaves = jax.tree_util.tree_leaves
         if same:
-            fields_bar, shared_bar = _adjoint_self(
-                f, weight, parity, geometry, block, rows, shared, idx, obar
+            # the stored geometry's cotangent only where it has a tangent (its positions
+            # are differentiated)
+            stored_bar = stored is not None and any(active[n_linear - 4 :])
+            which = jax.tree_util.tree_unflatten(rows_def, active[:n_rows_leaves])
+            wanted = (
+                [k for k, on in which.items() if on],
+                [i for i, on in enumerate(active[n_rows_leaves : n_rows_leaves + n_shared]) if on],
             )
-            return (*leaves(fields_bar), *leaves(shared_bar))
+            fields_bar, shared_bar, stored_bars = _adjoint_self(
+                f,
+                weight,
+                parity,
+                geometry,
+                block,
+                rows,
+                shared,
+                idx,
+                obar,
+                stored,
+                stored_bar,
+                wanted,
+            )
+            if stored is None:
+                return (*leaves(fields_bar), *leaves(shared_bar))
+            return (*leaves(fields_bar), *leaves(shared_bar), *(stored_bars or (None,) * 4))
         rows_bar, cols_bar, shared_bar = _adjoint_cross(
             f, weight, geometry, block, rows, cols, shared, idx, transpose[0], obar, members
         )
         return (*leaves(rows_bar), *leaves(cols_bar), *leaves(shared_bar))
 
-    n_linear = n_rows_leaves + (0 if same else n_cols_leaves) + n_shared
+    n_linear = n_rows_leaves + (0 if same else n_cols_leaves) + n_shared + (4 if stores else 0)
     return custom_adjoint(forward, adjoint, n_linear=n_linear)
 
 
@@ -711,11 +819,16 @@ def pair_sum(
     same = cols is None
     if parity is not None and (not same or weight is None):
         raise ValueError("pair_sum: parity needs a sum within one system and a weight")
+    stored = pairs.geometry
+    if stored is not None and (not same or pairs.members is not None):
+        raise ValueError("pair_sum: a stored geometry needs a sum within one system")
     if pairs.members is not None:
         return _member_sum(f, rows, cols, pairs, geometry, shared, weight, adjoint, block)
     if not adjoint or _autodiff_transposes(f):
         full = _weighted(f, weight)
-        return _forward(full, geometry, None, rows, rows if same else cols, shared, pairs.idx)
+        return _forward(
+            full, geometry, None, rows, rows if same else cols, shared, pairs.idx, stored
+        )
     rows_leaves, rows_def = jax.tree_util.tree_flatten(rows)
     cols_leaves, cols_def = jax.tree_util.tree_flatten(rows if same else cols)
     shared_leaves, shared_def = jax.tree_util.tree_flatten(shared)
@@ -730,14 +843,20 @@ def pair_sum(
         len(shared_leaves),
     )
     compact = pairs.transpose_members is not None
-    fn = _custom_sum(f, geometry, block, structure, same, weight, parity, compact)
+    fn = _custom_sum(
+        f, geometry, block, structure, same, weight, parity, compact, stored is not None
+    )
     dtype = rows_leaves[0].dtype
     shared_leaves = [jnp.asarray(s, dtype) for s in shared_leaves]
-    args = [*rows_leaves, *([] if same else cols_leaves), *shared_leaves, pairs.idx]
+    stored_leaves = [] if stored is None else list(_without_mask(stored))
+    args = [*rows_leaves, *([] if same else cols_leaves), *shared_leaves, *stored_leaves]
+    args.append(pairs.idx)
     if not same:
         args.append(pairs.transpose)
     if compact:
         args.append(pairs.transpose_members)
+    if stored is not None:
+        args.append(stored.mask)
     return fn(*args)
 
 

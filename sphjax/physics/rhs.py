@@ -114,8 +114,9 @@ class Neighbors:
         ``M`` particles of system ``i`` that have neighbours in system ``j`` at all (a
         fluid against its walls: :attr:`PairList.members`).
       reference: ``None``, or ``{i: fields}`` the reference-configuration quantities of
-        each solid ``i`` (its correction matrix ``L0``), computed once per run from the
-        initial State by :func:`with_reference`; ``None``: each evaluation computes them.
+        each solid ``i`` (its correction matrix ``L0`` and the pair geometry of its list,
+        ``geometry``), computed once per run from the initial State by
+        :func:`with_reference`; ``None``: each evaluation computes them.
       support_capacities: ``((i, i), width)`` of the lists kept at two levels: ``skin``
         holds the Verlet list (neighbours within the support plus the skin, rebuilt
         rarely), ``pairs`` those within ``(1 + SUPPORT_SKIN)`` times the support radius,
@@ -414,8 +415,9 @@ def _counts_overflow(counts, neighbors: Neighbors):
 
 
 def with_reference(state: State, neighbors: Neighbors, model) -> Neighbors:
-    """``neighbors`` with each solid's reference-configuration quantities (``L0``, eq. 15)
-    computed from ``state``.
+    """``neighbors`` with each solid's reference-configuration quantities computed from
+    ``state``: the pair geometry of its list (``X_ab``, ``|X_ab|``, ``W0``, ``grad0 W``;
+    :attr:`~sphjax.physics.pairs.PairList.geometry`) and ``L0`` (eq. 15).
 
     They depend only on the reference positions and volumes, which no step changes, so a
     run computes them once (:func:`sphjax.simulate`) instead of at every evaluation; as
@@ -427,8 +429,21 @@ def with_reference(state: State, neighbors: Neighbors, model) -> Neighbors:
     for i, system in enumerate(model.systems):
         if isinstance(system, SolidSystem) and _size(neighbors.blocks[i]):
             view = _view(state, neighbors.blocks[i], system, None)
-            reference[i] = solid_reference(view, neighbors.pairs[(i, i)], ctx)
+            pairs = neighbors.pairs[(i, i)]
+            geometry = pairs_module.stored_geometry(view["X"], pairs, ctx.geometry)
+            own = solid_reference(view, pairs.replace(geometry=geometry), ctx)
+            reference[i] = {**own, "geometry": geometry}
     return dataclasses.replace(neighbors, reference=reference or None)
+
+
+def reference_pairs(neighbors: Neighbors) -> dict:
+    """``neighbors.pairs`` with each solid's own list carrying the pair geometry of its
+    reference configuration (:func:`with_reference`), so that its pair sums read it."""
+    pairs = dict(neighbors.pairs)
+    for i, fields in (neighbors.reference or {}).items():
+        if "geometry" in fields:
+            pairs[(i, i)] = pairs[(i, i)].replace(geometry=fields["geometry"])
+    return pairs
 
 
 def update_neighbors(position, neighbors: Neighbors, model, rebuild=False) -> Neighbors:
@@ -571,6 +586,7 @@ def update_stage(state: State, neighbors: Neighbors, model, params, density_step
     check_params(model, params)
     if ctx is None:
         ctx = Context(params, Geometry.of(model), model.pair_adjoint, model.pair_block)
+    neighbors = dataclasses.replace(neighbors, pairs=reference_pairs(neighbors))
     blocks = neighbors.blocks
     views = [
         _view(state, block, system, density_step)
@@ -618,6 +634,7 @@ def _named(view):
 def interaction_stage(views, neighbors: Neighbors, model, ctx):
     """Stage 2: ``(acceleration, shift)`` of each system, summed over its interactions,
     gravity included (walls excepted; clamped solid particles get none)."""
+    neighbors = dataclasses.replace(neighbors, pairs=reference_pairs(neighbors))
     blocks, dtype = neighbors.blocks, views[0]["x"].dtype
     rates = []
     for i, system in enumerate(model.systems):
