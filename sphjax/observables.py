@@ -3,6 +3,8 @@
 * :func:`surge_front` — the dam-break surge front ``Z`` (Martin & Moyce 1952);
 * :func:`probe_pressure` — the pressure the fluid exerts at a probe point (a wall sensor);
 * :func:`poiseuille_centreline_speed` — the channel's centre-line speed;
+* :func:`centreline_profiles` — a lid-driven cavity's centreline velocities at Ghia, Ghia
+  & Shin's (1982) points;
 * :func:`tip_displacement` — the displacement of a solid's tip probe (plate, Turek-Hron);
 * :func:`oscillation_stats` — mean, amplitude and period of a signal;
 * :func:`energy_budget` — kinetic, gravitational, fluid internal (Tait) and elastic strain
@@ -98,6 +100,66 @@ def probe_pressure(states, case: Case, point):
     wet = total > 0
     average = jnp.sum(weight * states.pressure, axis=-1) / jnp.where(wet, total, 1.0)
     return jnp.where(wet, average, 0.0)
+
+
+#: Ghia, Ghia & Shin (1982), Table I: the heights ``y / L`` of their u-velocity samples on
+#: the vertical centreline (the walls, y = 0 and 1, left out)
+GHIA_Y = (
+    0.9766, 0.9688, 0.9609, 0.9531, 0.8516, 0.7344, 0.6172, 0.5000,
+    0.4531, 0.2813, 0.1719, 0.1016, 0.0703, 0.0625, 0.0547,
+)  # fmt: skip
+#: Ghia, Ghia & Shin (1982), Table II: the abscissae ``x / L`` of their v-velocity samples
+#: on the horizontal centreline (the walls, x = 0 and 1, left out)
+GHIA_X = (
+    0.9688, 0.9609, 0.9531, 0.9453, 0.9063, 0.8594, 0.8047, 0.5000,
+    0.2344, 0.2266, 0.1563, 0.0938, 0.0781, 0.0703, 0.0625,
+)  # fmt: skip
+
+
+def _kernel_velocity(states, case: Case, points):
+    """Shepard-normalised kernel average of the fluid velocity at ``points`` (``[P, d]``):
+    ``v(x) = sum_f v_f W(x - x_f) V_f / sum_f W(x - x_f) V_f``, ``V_f = m_f / rho_f``;
+    ``[..., P, d]``, 0 where no fluid particle lies within the support."""
+    model = case.model
+    position = states.position[..., None, :, :]  # [..., 1, N, d]
+    r = jnp.linalg.norm(position - points[:, None, :], axis=-1)  # [..., P, N]
+    fluid = (states.kind == Kind.FLUID)[..., None, :]
+    volume = (states.mass / states.density)[..., None, :]
+    weight = kernels.W(model.kernel, r, model.smoothing_length, model.dim)
+    weight = jnp.where(fluid & (r < model.cutoff), weight * volume, 0.0)
+    total = jnp.sum(weight, axis=-1)
+    wet = total > 0
+    summed = jnp.einsum("...pn,...nd->...pd", weight, states.velocity)
+    return jnp.where(wet[..., None], summed / jnp.where(wet, total, 1.0)[..., None], 0.0)
+
+
+def centreline_profiles(trajectory, case: Case, y=None, x=None):
+    """Centreline velocities of a lid-driven cavity, as Ghia, Ghia & Shin (1982) tabulate
+    them: ``u(y)`` on the vertical centreline ``x = L/2`` (their Table I) and ``v(x)`` on
+    the horizontal one ``y = L/2`` (Table II), in units of the lid speed ``U``.
+
+    Each is the kernel (Shepard) average of the fluid velocity (as in
+    :func:`probe_pressure`) with the case's kernel and smoothing length.
+
+    Args:
+      trajectory: a :class:`sphjax.Trajectory` or a State, with or without a leading time
+        axis.
+      case: the :func:`sphjax.cases.lid_driven_cavity` it was run from.
+      y, x: sample positions in units of ``L`` (default Ghia's interior points,
+        :data:`GHIA_Y` and :data:`GHIA_X`).
+    Returns:
+      ``(u, v)``: ``[..., len(y)]`` and ``[..., len(x)]`` over ``U``; differentiable.
+    """
+    states = getattr(trajectory, "states", trajectory)
+    L, U = case.info["length"], case.info["lid_speed"]
+    dtype = states.position.dtype
+    y = jnp.asarray(GHIA_Y if y is None else y, dtype) * L
+    x = jnp.asarray(GHIA_X if x is None else x, dtype) * L
+    vertical = jnp.stack([jnp.full_like(y, 0.5 * L), y], axis=-1)
+    horizontal = jnp.stack([x, jnp.full_like(x, 0.5 * L)], axis=-1)
+    u = _kernel_velocity(states, case, vertical)[..., 0] / U
+    v = _kernel_velocity(states, case, horizontal)[..., 1] / U
+    return u, v
 
 
 def tip_displacement(trajectory, case: Case):

@@ -40,6 +40,15 @@ def test_matches_scan_dam_break_with_walls_and_continuity_density():
     _compare(sphjax.cases.dam_break(n=4), n_steps=40, save_every=20, tol=1e-12)
 
 
+def test_matches_scan_lid_driven_cavity_wall_sliding_along_itself():
+    """The lid's particles carry U but stay put in both routes (walls never drift)."""
+    case = sphjax.cases.lid_driven_cavity(n=6)
+    _compare(case, n_steps=40, save_every=20, tol=1e-12)
+    sol = diffeqsolve_case(case, t1=40 * case.dt)
+    lid = case.info["lid_indices"]
+    assert jnp.array_equal(sol.ys.position[-1][lid], case.state.position[lid])
+
+
 def test_matches_scan_oscillating_plate_reference_neighbours():
     # A stiff solid amplifies round-off: a position round-off of 1e-16 L gives an
     # acceleration error of ~E 1e-16 L / (rho dx^2) per step, ~1e-12 of the velocity

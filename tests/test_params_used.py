@@ -28,6 +28,7 @@ FSI = ("kinematic_viscosity", "transport_pressure", "penalty_alpha")
 UNUSED = {
     "taylor_green": (4, FLUID_ONLY_VISCOUS),
     "poiseuille": (4, MORRIS_WALLS),
+    "lid_driven_cavity": (4, FLUID_ONLY_VISCOUS),
     "hydrostatic_tank": (4, MONAGHAN_WALLS),
     "dam_break": (4, MONAGHAN_WALLS),
     "oscillating_plate": (2, ("penalty_alpha",)),

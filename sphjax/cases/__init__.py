@@ -10,6 +10,7 @@ from __future__ import annotations
 import inspect
 
 from sphjax.cases._resolution import n_for_spacing
+from sphjax.cases.cavity import lid_driven_cavity
 from sphjax.cases.fluid import (
     dam_break,
     hydrostatic_tank,
@@ -48,6 +49,7 @@ from sphjax.cases.solid import (
 )
 from sphjax.cases.solid3d import beam_angular_frequency, cantilever_3d, cantilever_reference
 from sphjax.observables import (
+    centreline_profiles,
     oscillation_stats,
     poiseuille_centreline_speed,
     probe_pressure,
@@ -58,6 +60,7 @@ from sphjax.observables import (
 CASES = {
     "taylor_green": taylor_green,
     "poiseuille": poiseuille,
+    "lid_driven_cavity": lid_driven_cavity,
     "hydrostatic_tank": hydrostatic_tank,
     "dam_break": dam_break,
     "oscillating_plate": oscillating_plate,
@@ -111,6 +114,8 @@ __all__ = [
     "poiseuille",
     "poiseuille_startup_speed",
     "poiseuille_centreline_speed",
+    "lid_driven_cavity",
+    "centreline_profiles",
     "hydrostatic_tank",
     "dam_break",
     "surge_front",

@@ -25,7 +25,7 @@ class Kind(enum.IntEnum):
     """Particle kind tags stored in ``State.kind``; each system owns one or two kinds."""
 
     FLUID = 0  # weakly compressible fluid (FluidSystem)
-    WALL = 1  # boundary dummy particle (Adami et al. 2012), moves with its wall (WallSystem)
+    WALL = 1  # boundary dummy particle (Adami et al. 2012); fixed, velocity = wall surface's
     SOLID = 2  # total-Lagrangian elastic solid particle (SolidSystem)
     CLAMPED = 3  # solid particle whose motion is prescribed (fixed by default; SolidSystem)
 

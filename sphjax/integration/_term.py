@@ -80,7 +80,8 @@ class SPHTerm(diffrax.AbstractTerm):
         # no Verlet skin inside a vector field: rebuild at the current positions
         neighbors = update_neighbors(y.position, args.neighbors, self.model, rebuild=True)
         state = evaluate(state, neighbors, self.model, args.params, args.density_step)
-        velocity = state.velocity
+        # walls never move: their velocity is the surface velocity the viscous terms see
+        velocity = jnp.where((state.kind == Kind.WALL)[:, None], 0.0, state.velocity)
         solid = self.model.system(SolidSystem)
         if solid is None or solid.clamped_motion is None:  # clamped particles stay put
             velocity = jnp.where((state.kind == Kind.CLAMPED)[:, None], 0.0, velocity)

@@ -36,9 +36,11 @@ def kick_drift(state: State, dt, model) -> State:
     """First half of a step: half kick with the stored rates, then a full drift.
 
     Returns the State at ``t + dt`` with half-step velocities; its rates are still those
-    of ``t``.  Walls keep their (prescribed) velocity; with the transport-velocity
-    formulation fluid particles are advected with ``v~ = v_{n+1/2} + dt/2 a_b`` (Adami et
-    al. 2013); clamped particles follow ``SolidSystem.clamped_motion`` or stay put.
+    of ``t``.  Wall particles never move: their velocity is the prescribed velocity of
+    the wall's surface, which the no-slip viscous terms see (a lid sliding along itself,
+    a conveyor belt), not a drift; with the transport-velocity formulation fluid
+    particles are advected with ``v~ = v_{n+1/2} + dt/2 a_b`` (Adami et al. 2013); clamped
+    particles follow ``SolidSystem.clamped_motion`` or stay put.
     """
     kind = state.kind
     half = 0.5 * dt
@@ -46,6 +48,7 @@ def kick_drift(state: State, dt, model) -> State:
     position = state.position + dt * (velocity + half * state.shift_acceleration)
     time = state.time + dt
     solid = model.system(SolidSystem)
+    position = jnp.where((kind == Kind.WALL)[:, None], state.position, position)
     clamped = (kind == Kind.CLAMPED)[:, None]
     if solid is not None and solid.clamped_motion is not None:
         target = solid.clamped_motion(time, state.reference_position)

@@ -1,7 +1,9 @@
 """The wall system (boundary dummy particles, Adami, Hu & Adams 2012) and its update stage.
 
-Wall particles do not move by themselves (their motion is prescribed; fixed today).  In
-the update stage each takes its pressure from the fluid around it,
+Wall particles never move (the integrators keep their positions); their state velocity
+is the prescribed velocity of the wall's surface, ``v_wall`` below, so a wall may slide
+along itself (the lid of a driven cavity, a conveyor belt) while its particles stay put.
+In the update stage each takes its pressure from the fluid around it,
 
     p_w = ( sum_f p_f W_wf + (g - a_w) . sum_f rho_f r_wf W_wf ) / sum_f W_wf,
 
