@@ -10,9 +10,9 @@ import jax
 import jax.numpy as jnp
 
 from sphjax.core.pytree import pytree_dataclass
-from sphjax.core.state import Kind, State
+from sphjax.core.state import State
+from sphjax.integration.step import held_in_place
 from sphjax.physics.rhs import Neighbors, evaluate, overflowed, update_neighbors
-from sphjax.physics.solid.system import SolidSystem
 
 Array = jax.Array
 
@@ -80,11 +80,8 @@ class SPHTerm(diffrax.AbstractTerm):
         # no Verlet skin inside a vector field: rebuild at the current positions
         neighbors = update_neighbors(y.position, args.neighbors, self.model, rebuild=True)
         state = evaluate(state, neighbors, self.model, args.params, args.density_step)
-        # walls never move: their velocity is the surface velocity the viscous terms see
-        velocity = jnp.where((state.kind == Kind.WALL)[:, None], 0.0, state.velocity)
-        solid = self.model.system(SolidSystem)
-        if solid is None or solid.clamped_motion is None:  # clamped particles stay put
-            velocity = jnp.where((state.kind == Kind.CLAMPED)[:, None], 0.0, velocity)
+        # walls and unmoved clamps stay put (their velocity is not a drift)
+        velocity = jnp.where(held_in_place(state.kind, self.model), 0.0, state.velocity)
         acceleration = eqx.error_if(state.acceleration, overflowed(neighbors), _OVERFLOW_MESSAGE)
         return Rates(
             velocity,

@@ -32,6 +32,18 @@ def _free(kind):
     return ((kind == Kind.FLUID) | (kind == Kind.SOLID))[:, None]
 
 
+def held_in_place(kind, model):
+    """``[N, 1]`` True for the particles whose positions no integrator changes: walls
+    (their velocity is the surface velocity the no-slip terms see, not a drift) and
+    clamped particles without a prescribed motion (``SolidSystem.clamped_motion``).  The
+    one rule for both drivers (this step and the diffrax term)."""
+    solid = model.system(SolidSystem)
+    held = kind == Kind.WALL
+    if solid is None or solid.clamped_motion is None:
+        held = held | (kind == Kind.CLAMPED)
+    return held[:, None]
+
+
 def kick_drift(state: State, dt, model) -> State:
     """First half of a step: half kick with the stored rates, then a full drift.
 
@@ -48,14 +60,12 @@ def kick_drift(state: State, dt, model) -> State:
     position = state.position + dt * (velocity + half * state.shift_acceleration)
     time = state.time + dt
     solid = model.system(SolidSystem)
-    position = jnp.where((kind == Kind.WALL)[:, None], state.position, position)
-    clamped = (kind == Kind.CLAMPED)[:, None]
+    position = jnp.where(held_in_place(kind, model), state.position, position)
     if solid is not None and solid.clamped_motion is not None:
+        clamped = (kind == Kind.CLAMPED)[:, None]
         target = solid.clamped_motion(time, state.reference_position)
         velocity = jnp.where(clamped, (target - state.position) / dt, velocity)
         position = jnp.where(clamped, target, position)
-    else:
-        position = jnp.where(clamped, state.position, position)
     position = wrap_fn(model.domain)(position)
     return state.replace(position=position, velocity=velocity, time=time)
 
