@@ -75,19 +75,9 @@ def fast_acceleration(solid: State, system: SolidSystem, pairs, ctx, reference=N
     gravity, zero on clamped particles; ``solid`` holds the solid's block only.
     ``reference``: the solid's reference quantities (``L0``), or ``None`` (computed
     here)."""
-    view = {
-        "x": solid.position,
-        "v": solid.velocity,
-        "m": solid.mass,
-        "rho": solid.density,
-        "X": solid.reference_position,
-        "V": solid.volume,
-        "free": solid.kind == Kind.SOLID,
-    }
-    view = update_solid(system, view, pairs, ctx, reference)
+    view = update_solid(system, system.view(solid, slice(None)), pairs, ctx, reference)
     elastic = INTERACTIONS[(SolidSystem, SolidSystem)](system, view, system, view, pairs, ctx)
-    a = elastic["a"] + ctx.params.gravity
-    return jnp.where(view["free"][:, None], a, 0.0)
+    return system.body_acceleration(view, elastic["a"], ctx.params)
 
 
 def kick_drift_kick(state: State, neighbors, dt, model, params):
@@ -116,7 +106,7 @@ def kick_drift_kick(state: State, neighbors, dt, model, params):
     h = dt / system.substeps
 
     def substep(solid, _):
-        return kdk.closing_kick(with_fast(kdk.kick_drift(solid, h, model)), h), None
+        return kdk.closing_kick(with_fast(kdk.kick_drift(solid, h, model)), h, model), None
 
     inner = jax.lax.scan(substep, inner, None, length=system.substeps)[0]
 
@@ -126,6 +116,7 @@ def kick_drift_kick(state: State, neighbors, dt, model, params):
         velocity=drifted.velocity.at[s].set(inner.velocity),
     )
     neighbors = update_neighbors(drifted.position, neighbors, model)
-    out = kdk.closing_kick(evaluate(drifted, neighbors, model, params, density_step=dt), dt)
+    out = evaluate(drifted, neighbors, model, params, density_step=dt)
+    out = kdk.closing_kick(out, dt, model)
     solid = coupling_kick(inner, out.acceleration[s] - inner.acceleration)
     return out.replace(velocity=out.velocity.at[s].set(solid.velocity)), neighbors

@@ -24,24 +24,30 @@ from collections.abc import Callable
 import jax.numpy as jnp
 
 from sphjax.core.space import wrap_fn
-from sphjax.core.state import Kind, State
-from sphjax.physics.solid.system import SolidSystem
+from sphjax.core.state import State
 
 
-def _free(kind):
-    return ((kind == Kind.FLUID) | (kind == Kind.SOLID))[:, None]
+def _any_kind(kind, kinds):
+    """``[N, 1]`` True where ``kind`` is one of ``kinds`` (a static tuple)."""
+    mask = jnp.zeros(kind.shape, bool)
+    for k in kinds:
+        mask = mask | (kind == k)
+    return mask[:, None]
+
+
+def _free(kind, model):
+    """``[N, 1]`` True for the particles whose velocity the kicks change (each system's
+    ``free_kinds``)."""
+    return _any_kind(kind, tuple(k for s in model.systems for k in s.free_kinds))
 
 
 def held_in_place(kind, model):
-    """``[N, 1]`` True for the particles whose positions no integrator changes: walls
-    (their velocity is the surface velocity the no-slip terms see, not a drift) and
-    clamped particles without a prescribed motion (``SolidSystem.clamped_motion``).  The
-    one rule for both drivers (this step and the diffrax term)."""
-    solid = model.system(SolidSystem)
-    held = kind == Kind.WALL
-    if solid is None or solid.clamped_motion is None:
-        held = held | (kind == Kind.CLAMPED)
-    return held[:, None]
+    """``[N, 1]`` True for the particles whose positions no integrator changes (each
+    system's ``held_kinds()``): walls (their velocity is the surface velocity the no-slip
+    terms see, not a drift) and clamped particles without a prescribed motion
+    (``SolidSystem.clamped_motion``).  The one rule for both drivers (this step and the
+    diffrax term)."""
+    return _any_kind(kind, tuple(k for s in model.systems for k in s.held_kinds()))
 
 
 def kick_drift(state: State, dt, model) -> State:
@@ -56,24 +62,26 @@ def kick_drift(state: State, dt, model) -> State:
     """
     kind = state.kind
     half = 0.5 * dt
-    velocity = jnp.where(_free(kind), state.velocity + half * state.acceleration, state.velocity)
+    velocity = jnp.where(
+        _free(kind, model), state.velocity + half * state.acceleration, state.velocity
+    )
     position = state.position + dt * (velocity + half * state.shift_acceleration)
     time = state.time + dt
-    solid = model.system(SolidSystem)
     position = jnp.where(held_in_place(kind, model), state.position, position)
-    if solid is not None and solid.clamped_motion is not None:
-        clamped = (kind == Kind.CLAMPED)[:, None]
-        target = solid.clamped_motion(time, state.reference_position)
-        velocity = jnp.where(clamped, (target - state.position) / dt, velocity)
-        position = jnp.where(clamped, target, position)
+    for system in model.systems:
+        motion = system.prescribed_motion(time, state)
+        if motion is not None:
+            moved, target = motion
+            velocity = jnp.where(moved, (target - state.position) / dt, velocity)
+            position = jnp.where(moved, target, position)
     position = wrap_fn(model.domain)(position)
     return state.replace(position=position, velocity=velocity, time=time)
 
 
-def closing_kick(state: State, dt) -> State:
+def closing_kick(state: State, dt, model) -> State:
     """Second half of a step: half kick with the freshly evaluated accelerations."""
     velocity = jnp.where(
-        _free(state.kind), state.velocity + 0.5 * dt * state.acceleration, state.velocity
+        _free(state.kind, model), state.velocity + 0.5 * dt * state.acceleration, state.velocity
     )
     return state.replace(velocity=velocity)
 
@@ -87,4 +95,4 @@ def kick_drift_kick(state: State, dt, model, rates: Callable[[State, object], St
         the drifted state, the continuity density first advanced by ``density_step``
         (:func:`sphjax.evaluate`).
     """
-    return closing_kick(rates(kick_drift(state, dt, model), dt), dt)
+    return closing_kick(rates(kick_drift(state, dt, model), dt), dt, model)

@@ -1,4 +1,4 @@
-"""Stable time steps.
+"""Stable time steps: the smallest of every system's limits (``time_step_limits``).
 
 Fluid: ``dt = min(CFL h / (c0 + |v|max), 0.125 h^2 / nu, 0.25 sqrt(h / |g|))``, CFL 0.25.
 Solid (TLSPH): ``dt = CFL h / (c_s + |v|max)``, ``c_s = sqrt(K / rho0)``,
@@ -15,8 +15,7 @@ import math
 
 import numpy as np
 
-from sphjax.core.state import Kind, State
-from sphjax.physics.fluid.system import FluidSystem
+from sphjax.core.state import State
 from sphjax.physics.solid.system import SolidSystem
 
 FLUID_CFL = 0.25
@@ -25,35 +24,18 @@ MAX_FLUID_CFL = 0.5
 MAX_SOLID_CFL = 0.6
 
 
-def solid_sound_speed(params, dim: int):
-    """``c_s = sqrt(K / rho0)`` with the bulk modulus ``K = E / (d (1 - 2 nu))``."""
-    bulk = params.young_modulus / (dim * (1.0 - 2.0 * params.poisson_ratio))
-    return (bulk / params.solid_density) ** 0.5
-
-
 def stable_time_step(
     state: State, model, params, fluid_cfl=FLUID_CFL, solid_cfl=SOLID_CFL
 ) -> float:
     """The largest stable step for the kinds in ``model`` (concrete values, outside jit)."""
-    h = model.smoothing_length
     kinds = np.asarray(state.kind)
     speed = np.linalg.norm(np.asarray(state.velocity), axis=-1)
+    cfl = {"fluid": fluid_cfl, "solid": solid_cfl}
     limits = []
-    if int(Kind.FLUID) in model.particle_kinds:
-        v_max = float(speed[kinds == Kind.FLUID].max(initial=0.0))
-        limits.append(fluid_cfl * h / (float(params.sound_speed) + v_max))
-        fluid = model.system(FluidSystem)
-        nu = float(params.kinematic_viscosity) if fluid.physical_viscosity else 0.0
-        if nu > 0:
-            limits.append(0.125 * h**2 / nu)
-        g = float(np.linalg.norm(np.asarray(params.gravity)))
-        if g > 0:
-            limits.append(0.25 * math.sqrt(h / g))
-    if int(Kind.SOLID) in model.particle_kinds:
-        v_max = float(speed[kinds == Kind.SOLID].max(initial=0.0))
-        c_s = float(solid_sound_speed(params, model.dim))
-        substeps = model.system(SolidSystem).substeps
-        limits.append(substeps * solid_cfl * h / (c_s + v_max))
+    for system in model.systems:
+        moving = np.isin(kinds, [int(k) for k in system.free_kinds])
+        v_max = float(speed[moving].max(initial=0.0))
+        limits += system.time_step_limits(v_max, params, model, cfl[system.params_group])
     if not limits:
         raise ValueError("the model has no fluid or solid particles to set a time step")
     return min(limits)

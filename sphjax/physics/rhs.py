@@ -41,14 +41,10 @@ from sphjax.core.neighbors import (
 )
 from sphjax.core.pytree import pytree_dataclass
 from sphjax.core.space import displacement_fn
-from sphjax.core.state import Kind, State
-from sphjax.physics import fsi
+from sphjax.core.state import State
 from sphjax.physics import pairs as pairs_module
-from sphjax.physics.boundary.system import WallSystem, update_wall
-from sphjax.physics.fluid.system import FluidSystem, update_fluid
 from sphjax.physics.interactions import INTERACTIONS, UPDATE_PAIRS
 from sphjax.physics.pairs import Geometry, PairList
-from sphjax.physics.solid.system import SolidSystem, solid_reference, update_solid
 
 NEIGHBOR_IDX = "sphjax_neighbor_idx"
 #: name of the per-particle fields of the update stage (density, pressure) that reverse
@@ -83,8 +79,11 @@ def system_blocks(kind, model) -> tuple[tuple[int, int], ...]:
 
 
 def neighbor_pairs(model) -> tuple[tuple[int, int], ...]:
-    """Ordered pairs ``(i, j)`` of systems whose neighbour list is needed."""
+    """Ordered pairs ``(i, j)`` of systems whose neighbour list is needed: those of an
+    interaction or an update stage, and their transposes (the list of ``j`` against
+    ``i`` is what the adjoint of a sum over ``i`` against ``j`` runs over)."""
     wanted = set(INTERACTIONS) | UPDATE_PAIRS
+    wanted |= {(b, a) for a, b in wanted}
     return tuple(
         (i, j)
         for i, a in enumerate(model.systems)
@@ -427,12 +426,9 @@ def with_reference(state: State, neighbors: Neighbors, model) -> Neighbors:
     ctx = Context(None, Geometry.of(model), model.pair_adjoint, model.pair_block)
     reference = {}
     for i, system in enumerate(model.systems):
-        if isinstance(system, SolidSystem) and _size(neighbors.blocks[i]):
-            view = _view(state, neighbors.blocks[i], system, None)
-            pairs = neighbors.pairs[(i, i)]
-            geometry = pairs_module.stored_geometry(view["X"], pairs, ctx.geometry)
-            own = solid_reference(view, pairs.replace(geometry=geometry), ctx)
-            reference[i] = {**own, "geometry": geometry}
+        if not system.current_configuration and _size(neighbors.blocks[i]):
+            view = system.view(state, slice(*neighbors.blocks[i]))
+            reference[i] = system.reference_quantities(view, neighbors.pairs[(i, i)], ctx)
     return dataclasses.replace(neighbors, reference=reference or None)
 
 
@@ -536,6 +532,7 @@ class Context:
     adjoint: bool
     block: int | None
     fluid_pairs: PairList | None = None
+    reference: dict | None = None
 
     def pair_sum(self, f, rows, cols, pairs, shared=(), weight=None, parity=None):
         return pairs_module.pair_sum(
@@ -555,7 +552,7 @@ class Context:
 def check_params(model, params):
     """Raise a ValueError if ``params`` lacks the group a system of ``model`` needs."""
     for system in model.systems:
-        group = "solid" if isinstance(system, SolidSystem) else "fluid"
+        group = system.params_group
         if object.__getattribute__(params, group) is None:
             raise ValueError(
                 f"the model has a {type(system).__name__} but Params has no {group} "
@@ -580,46 +577,22 @@ def evaluate(state: State, neighbors: Neighbors, model, params, density_step=Non
 
 
 def update_stage(state: State, neighbors: Neighbors, model, params, density_step=None, ctx=None):
-    """Stage 1: each system's fields after its update, in the fixed order fluids, walls,
-    solids.  Returns one dict per system (``x, v, m, rho`` and what the update adds:
-    fluid ``p, drho``; wall ``p, rho, v_viscous``; solid ``L0, F, P, PL0``)."""
+    """Stage 1: each system's fields after its update (``system.update``), in the order of
+    their ``stage`` (fluids, then walls, then solids).  Returns one dict per system
+    (``x, v, m, rho`` and what its update adds: fluid ``p, drho``; wall ``p, rho,
+    v_viscous``; solid ``L0, F, P, PL0``)."""
     check_params(model, params)
     if ctx is None:
         ctx = Context(params, Geometry.of(model), model.pair_adjoint, model.pair_block)
-    neighbors = dataclasses.replace(neighbors, pairs=reference_pairs(neighbors))
-    blocks = neighbors.blocks
+    ctx = dataclasses.replace(ctx, reference=neighbors.reference)
+    pairs, blocks = reference_pairs(neighbors), neighbors.blocks
     views = [
-        _view(state, block, system, density_step)
+        system.view(state, slice(*block), density_step)
         for system, block in zip(model.systems, blocks, strict=True)
     ]
-    for i, system in enumerate(model.systems):
-        if isinstance(system, FluidSystem) and _size(blocks[i]):
-            boundaries = [
-                (views[j], neighbors.pairs[(i, j)])
-                for j, other in enumerate(model.systems)
-                if isinstance(other, WallSystem) and (i, j) in neighbors.pairs
-            ] + [
-                (fsi.fluid_view_of_solid(views[j], params.fluid), neighbors.pairs[(i, j)])
-                for j, other in enumerate(model.systems)
-                if isinstance(other, SolidSystem) and (i, j) in neighbors.pairs and _size(blocks[j])
-            ]
-            fluid_ctx = dataclasses.replace(ctx, fluid_pairs=neighbors.pairs[(i, i)])
-            views[i] = update_fluid(system, views[i], boundaries, fluid_ctx, density_step)
-    for i, system in enumerate(model.systems):
-        if isinstance(system, WallSystem) and _size(blocks[i]):
-            for j, fluid_system in enumerate(model.systems):
-                if (i, j) in neighbors.pairs and isinstance(fluid_system, FluidSystem):
-                    pairs = neighbors.pairs[(i, j)]
-                    views[i] = update_wall(system, views[i], fluid_system, views[j], pairs, ctx)
-    for i, system in enumerate(model.systems):
-        if isinstance(system, SolidSystem) and _size(blocks[i]):
-            reference = (neighbors.reference or {}).get(i)
-            views[i] = update_solid(system, views[i], neighbors.pairs[(i, i)], ctx, reference)
-            for j, fluid_system in enumerate(model.systems):
-                if (i, j) in neighbors.pairs and isinstance(fluid_system, FluidSystem):
-                    views[i] = fsi.update_solid_boundary(
-                        system, views[i], fluid_system, views[j], neighbors.pairs[(i, j)], ctx
-                    )
+    for i in sorted(range(len(model.systems)), key=lambda i: model.systems[i].stage):
+        if _size(blocks[i]):
+            views[i] = model.systems[i].update(i, views, model.systems, pairs, ctx, density_step)
     return [_named(view) for view in views]
 
 
@@ -651,35 +624,12 @@ def interaction_stage(views, neighbors: Neighbors, model, ctx):
             acceleration = acceleration + out["a"]
             if "shift" in out:
                 shift = shift + out["shift"]
-        if not isinstance(system, WallSystem):
-            acceleration = acceleration + ctx.params.gravity
-        if isinstance(system, SolidSystem):
-            acceleration = jnp.where(views[i]["free"][:, None], acceleration, 0.0)
-        rates.append((acceleration, shift))
+        rates.append((system.body_acceleration(views[i], acceleration, ctx.params), shift))
     return rates
 
 
 def _size(block):
     return block[1] - block[0]
-
-
-def _view(state: State, block, system, density_step):
-    """The fields of one system's block of ``state``."""
-    s = slice(*block)
-    view = {
-        "x": state.position[s],
-        "v": state.velocity[s],
-        "m": state.mass[s],
-        "rho": state.density[s],
-    }
-    if isinstance(system, FluidSystem) and system.transport_velocity is not None:
-        if density_step is not None:
-            view["dv"] = 0.5 * density_step * state.shift_acceleration[s]
-    if isinstance(system, SolidSystem):
-        free = state.kind[s] == Kind.SOLID
-        view.update(X=state.reference_position[s], V=state.volume[s], free=free)
-        view["a"] = state.acceleration[s]
-    return view
 
 
 def _assemble(state: State, views, rates) -> State:

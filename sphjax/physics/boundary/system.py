@@ -24,6 +24,8 @@ from sphjax.physics.boundary.wall import (
     wall_pressure,
     wall_velocity,
 )
+from sphjax.physics.fluid.system import FluidSystem
+from sphjax.physics.system import block_fields
 
 
 @dataclasses.dataclass(frozen=True)
@@ -38,6 +40,10 @@ class WallSystem:
 
     kinds = (Kind.WALL,)
     current_configuration = True
+    #: its place in the update stage: after the fluid whose pressure it extrapolates
+    stage = 1
+    #: the Params group it reads (the fluid's equation of state and gravity)
+    params_group = "fluid"
 
     def __post_init__(self):
         if not isinstance(self.boundary, AdamiBoundary):
@@ -56,6 +62,45 @@ class WallSystem:
 
     def replace(self, **changes) -> WallSystem:
         return dataclasses.replace(self, **changes)
+
+    # the system protocol (sphjax.physics.system)
+
+    #: the kinds whose velocity the integrators' kicks change: none (a wall's velocity
+    #: is its surface velocity)
+    free_kinds = ()
+
+    def held_kinds(self) -> tuple:
+        """Wall particles never move."""
+        return (Kind.WALL,)
+
+    def prescribed_motion(self, time, state):
+        """No prescribed motion (a sliding wall slides along itself)."""
+        return None
+
+    def time_step_limits(self, v_max: float, params, model, cfl: float) -> list[float]:
+        """Walls set no limit of their own."""
+        return []
+
+    def view(self, state, block: slice, density_step=None) -> dict:
+        """The walls' fields ``x, v, m, rho`` (``v``: the surface velocity)."""
+        return block_fields(state, block)
+
+    def boundary_view(self, view: dict, params) -> dict:
+        """Walls are a boundary to a fluid with their own ``x, m, v``."""
+        return view
+
+    def update(self, i: int, views: list, systems: tuple, pairs: dict, ctx, density_step=None):
+        """Update stage: pressure, density and viscous velocity extrapolated from each
+        fluid it has a list against (:func:`update_wall`)."""
+        view = views[i]
+        for j, fluid in enumerate(systems):
+            if (i, j) in pairs and isinstance(fluid, FluidSystem):
+                view = update_wall(self, view, fluid, views[j], pairs[(i, j)], ctx)
+        return view
+
+    def body_acceleration(self, view: dict, acceleration, params):
+        """Walls do not move: no gravity."""
+        return acceleration
 
 
 def update_wall(system: WallSystem, wall: dict, fluid_system, fluid: dict, pairs, ctx):

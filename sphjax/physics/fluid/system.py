@@ -20,8 +20,10 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+import math
 
 import jax.numpy as jnp
+import numpy as np
 
 from sphjax.core import kernels
 from sphjax.core.params import FLUID_DEFAULTS, fields_read, refusal
@@ -45,6 +47,7 @@ from sphjax.physics.fluid.density_diffusion import (
 from sphjax.physics.fluid.eos import TaitEOS
 from sphjax.physics.fluid.momentum import TransportVelocity
 from sphjax.physics.fluid.viscosity import ArtificialViscosity, MorrisViscosity
+from sphjax.physics.system import block_fields
 
 
 @dataclasses.dataclass(frozen=True)
@@ -70,6 +73,10 @@ class FluidSystem:
 
     kinds = (Kind.FLUID,)
     current_configuration = True
+    #: its place in the update stage: fluids first (walls and solids read its pressure)
+    stage = 0
+    #: the Params group it reads
+    params_group = "fluid"
 
     def __post_init__(self):
         if not isinstance(self.density, SummationDensity | ContinuityDensity):
@@ -164,6 +171,62 @@ class FluidSystem:
 
     def replace(self, **changes) -> FluidSystem:
         return dataclasses.replace(self, **changes)
+
+    # the system protocol (sphjax.physics.system)
+
+    #: the kinds whose velocity the integrators' kicks change
+    free_kinds = (Kind.FLUID,)
+
+    def held_kinds(self) -> tuple:
+        """Fluid particles all move."""
+        return ()
+
+    def prescribed_motion(self, time, state):
+        """No prescribed motion."""
+        return None
+
+    def time_step_limits(self, v_max: float, params, model, cfl: float) -> list[float]:
+        """``CFL h / (c0 + |v|max)`` (acoustic), ``0.125 h^2 / nu`` (viscous, with
+        :class:`~sphjax.MorrisViscosity`) and ``0.25 sqrt(h / |g|)`` (body force)."""
+        h = model.smoothing_length
+        limits = [cfl * h / (float(params.sound_speed) + v_max)]
+        nu = float(params.kinematic_viscosity) if self.physical_viscosity else 0.0
+        if nu > 0:
+            limits.append(0.125 * h**2 / nu)
+        g = float(np.linalg.norm(np.asarray(params.gravity)))
+        if g > 0:
+            limits.append(0.25 * math.sqrt(h / g))
+        return limits
+
+    def view(self, state, block: slice, density_step=None) -> dict:
+        """The fluid's fields ``x, v, m, rho``; with the transport velocity inside a step
+        (``density_step``), ``dv``: the half kick of the background-pressure
+        acceleration the drift just took."""
+        view = block_fields(state, block)
+        if self.transport_velocity is not None and density_step is not None:
+            view["dv"] = 0.5 * density_step * state.shift_acceleration[block]
+        return view
+
+    def boundary_view(self, view: dict, params) -> dict | None:
+        """A fluid is no boundary of another system's density sums."""
+        return None
+
+    def update(self, i: int, views: list, systems: tuple, pairs: dict, ctx, density_step=None):
+        """Update stage: density and pressure (:func:`update_fluid`), the fluid's own pairs
+        and those against every system that is a boundary to it (``boundary_view``)."""
+        boundaries = []
+        for j, other in enumerate(systems):
+            if j == i or (i, j) not in pairs or views[j]["x"].shape[0] == 0:
+                continue
+            seen = other.boundary_view(views[j], ctx.params)
+            if seen is not None:
+                boundaries.append((seen, pairs[(i, j)]))
+        fluid_ctx = dataclasses.replace(ctx, fluid_pairs=pairs[(i, i)])
+        return update_fluid(self, views[i], boundaries, fluid_ctx, density_step)
+
+    def body_acceleration(self, view: dict, acceleration, params):
+        """The interactions' acceleration plus gravity (eq. 10)."""
+        return acceleration + params.gravity
 
 
 def _kernel_summand(pair, a, b, shared):

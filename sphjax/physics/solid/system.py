@@ -35,7 +35,9 @@ import jax.numpy as jnp
 from sphjax.core.params import SOLID_DEFAULTS, fields_read, refusal
 from sphjax.core.space import displacement_fn
 from sphjax.core.state import Kind
+from sphjax.physics import fsi
 from sphjax.physics import pairs as pair_sums
+from sphjax.physics.fluid.system import FluidSystem
 from sphjax.physics.solid.boundary import SolidBoundary
 from sphjax.physics.solid.correction import (
     corrected_kernel_gradient,
@@ -45,6 +47,7 @@ from sphjax.physics.solid.correction import (
 from sphjax.physics.solid.deformation import deformation_term
 from sphjax.physics.solid.material import StVenantKirchhoff
 from sphjax.physics.solid.penalty import PenaltyForce
+from sphjax.physics.system import block_fields
 
 
 @dataclasses.dataclass(frozen=True)
@@ -75,6 +78,10 @@ class SolidSystem:
 
     kinds = (Kind.SOLID, Kind.CLAMPED)
     current_configuration = False
+    #: its place in the update stage: after the fluid, whose pressure it takes as a boundary
+    stage = 2
+    #: the Params group it reads
+    params_group = "solid"
 
     def __post_init__(self):
         if not hasattr(self.material, "pk1"):
@@ -117,6 +124,77 @@ class SolidSystem:
 
     def replace(self, **changes) -> SolidSystem:
         return dataclasses.replace(self, **changes)
+
+    # the system protocol (sphjax.physics.system)
+
+    #: the kinds whose velocity the integrators' kicks change (clamped particles' is set
+    #: by their prescribed motion, if any)
+    free_kinds = (Kind.SOLID,)
+
+    def held_kinds(self) -> tuple:
+        """Clamped particles stay put unless ``clamped_motion`` moves them."""
+        return (Kind.CLAMPED,) if self.clamped_motion is None else ()
+
+    def prescribed_motion(self, time, state):
+        """``([N, 1] mask, [N, d] positions)``: clamped particles at
+        ``clamped_motion(t, X)``, or ``None`` if they stay put."""
+        if self.clamped_motion is None:
+            return None
+        target = self.clamped_motion(time, state.reference_position)
+        return (state.kind == Kind.CLAMPED)[:, None], target
+
+    def time_step_limits(self, v_max: float, params, model, cfl: float) -> list[float]:
+        """``substeps CFL h / (c_s + |v|max)`` with the bulk sound speed
+        :func:`solid_sound_speed` (split integration: the solid takes ``substeps`` steps
+        of its own per step)."""
+        c_s = float(solid_sound_speed(params, model.dim))
+        return [self.substeps * cfl * model.smoothing_length / (c_s + v_max)]
+
+    def view(self, state, block: slice, density_step=None) -> dict:
+        """The solid's fields ``x, v, m, rho``, its reference positions ``X`` and volumes
+        ``V``, ``free`` (True for kind ``SOLID``, False for ``CLAMPED``) and ``a``, the
+        acceleration of the last evaluation (the fluid's boundary pressure reads it)."""
+        view = block_fields(state, block)
+        view.update(X=state.reference_position[block], V=state.volume[block])
+        view["free"] = state.kind[block] == Kind.SOLID
+        view["a"] = state.acceleration[block]
+        return view
+
+    def boundary_view(self, view: dict, params) -> dict:
+        """A fluid sees the solid as a moving boundary of hydrodynamic mass
+        (:func:`sphjax.physics.fsi.fluid_view_of_solid`)."""
+        return fsi.fluid_view_of_solid(view, params.fluid)
+
+    def update(self, i: int, views: list, systems: tuple, pairs: dict, ctx, density_step=None):
+        """Update stage: ``L0``, ``F`` and the stress (:func:`update_solid`, with the
+        reference quantities computed once per run where ``ctx.reference`` has them), then
+        its boundary pressure from each fluid it has a list against
+        (:func:`sphjax.physics.fsi.update_solid_boundary`)."""
+        reference = (ctx.reference or {}).get(i)
+        view = update_solid(self, views[i], pairs[(i, i)], ctx, reference)
+        for j, fluid in enumerate(systems):
+            if (i, j) in pairs and isinstance(fluid, FluidSystem):
+                view = fsi.update_solid_boundary(self, view, fluid, views[j], pairs[(i, j)], ctx)
+        return view
+
+    def reference_quantities(self, view: dict, pairs, ctx) -> dict:
+        """What depends on the reference configuration only, computed once per run: the
+        pair geometry of its list (``X_ab``, ``|X_ab|``, ``W0``, ``grad0 W``) and ``L0``
+        (eq. 15, :func:`solid_reference`)."""
+        geometry = pair_sums.stored_geometry(view["X"], pairs, ctx.geometry)
+        own = solid_reference(view, pairs.replace(geometry=geometry), ctx)
+        return {**own, "geometry": geometry}
+
+    def body_acceleration(self, view: dict, acceleration, params):
+        """The interactions' acceleration plus gravity (eq. 14); none on clamped
+        particles, whose motion is prescribed."""
+        return jnp.where(view["free"][:, None], acceleration + params.gravity, 0.0)
+
+
+def solid_sound_speed(params, dim: int):
+    """``c_s = sqrt(K / rho0)`` with the bulk modulus ``K = E / (d (1 - 2 nu))``."""
+    bulk = params.young_modulus / (dim * (1.0 - 2.0 * params.poisson_ratio))
+    return (bulk / params.solid_density) ** 0.5
 
 
 def _moment_summand(pair, a, b, shared):
