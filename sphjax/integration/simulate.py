@@ -31,8 +31,7 @@ from sphjax.core.case import Case
 from sphjax.core.model import Model
 from sphjax.core.params import Params
 from sphjax.core.state import State, Trajectory
-from sphjax.integration import split
-from sphjax.integration import step as kdk
+from sphjax.integration.stepper import stepper_for
 from sphjax.integration.timestep import check_time_step
 from sphjax.physics.rhs import (
     NEIGHBOR_IDX,
@@ -41,7 +40,6 @@ from sphjax.physics.rhs import (
     Neighbors,
     build_neighbors,
     check_params,
-    evaluate,
     list_sizes,
     overflowed,
     system_blocks,
@@ -83,20 +81,12 @@ _KEEP_NEIGHBOR_IDX = jax.checkpoint_policies.save_only_these_names(NEIGHBOR_IDX,
 def kick_drift_kick(state: State, neighbors: Neighbors, dt, model: Model, params: Params):
     """Advance one step of size ``dt`` with neighbour lists; returns ``(state, neighbors)``.
 
-    :func:`sphjax.integration.step.kick_drift_kick` with the right-hand side evaluated on
-    neighbour lists updated at the drifted positions.  A solid with ``substeps > 1`` is
-    sub-cycled inside the step (:mod:`sphjax.integration.split`).
+    The step of :func:`sphjax.integration.stepper.stepper_for` ``(model)``: kick-drift-kick
+    with the right-hand side evaluated on neighbour lists updated at the drifted positions;
+    a solid with ``substeps > 1`` is sub-cycled inside the step
+    (:mod:`sphjax.integration.split`).
     """
-    if split.split_active(model):
-        return split.kick_drift_kick(state, neighbors, dt, model, params)
-    updated = []
-
-    def rates(drifted, density_step):
-        updated.append(update_neighbors(drifted.position, neighbors, model))
-        return evaluate(drifted, updated[0], model, params, density_step=density_step)
-
-    state = kdk.kick_drift_kick(state, dt, model, rates)
-    return state, updated[0]
+    return stepper_for(model).step((state, neighbors), dt, params)
 
 
 def unhealthy(state: State, model: Model):
@@ -425,7 +415,7 @@ def _simulate_traced(state, neighbors, dt, params, model, *, segments, checkpoin
     instability are raised from inside the computation.  Returns the frames, the initial
     one first."""
     neighbors = update_neighbors(state.position, neighbors, model, rebuild=True)
-    state = evaluate(state, neighbors, model, params)
+    state, neighbors = stepper_for(model).init((state, neighbors), params)
     # what no step changes (a solid's reference list and quantities) stays out of the
     # scans' carry: reverse mode then keeps it once, not once per step or chunk
     fixed, neighbors = _split_fixed(neighbors, model)
@@ -447,6 +437,12 @@ def _simulate_traced(state, neighbors, dt, params, model, *, segments, checkpoin
     return _stack(all_frames)
 
 
+@functools.partial(jax.jit, static_argnames="model")
+def _init(state, neighbors, params, model):
+    """The stepper's first state, rates evaluated (compiled once per Model and shape)."""
+    return stepper_for(model).init((state, neighbors), params)[0]
+
+
 def _simulate_in_chunks(
     state,
     neighbors,
@@ -463,7 +459,7 @@ def _simulate_in_chunks(
     """Compiled chunks of at most ``steps_per_chunk`` steps with concrete checks between
     them: a neighbour overflow re-allocates and repeats the chunk; an unstable run hands
     the frames before the failure to ``on_frames`` and raises.  Returns the frames."""
-    state = jax.jit(evaluate, static_argnames="model")(state, neighbors, model, params)
+    state = _init(state, neighbors, params, model)
     bad = ~np.all(np.isfinite(np.asarray(state.acceleration)), axis=-1)
     if bad.any():
         particle = int(np.argmax(bad))

@@ -34,11 +34,14 @@ buffers with it, 38.1 MB without).
 
 from __future__ import annotations
 
+import dataclasses
+
 import jax
 import jax.numpy as jnp
 
 from sphjax.core.state import Kind, State
 from sphjax.integration import step as kdk
+from sphjax.integration.stepper import KickDriftKickStepper
 from sphjax.physics.interactions import INTERACTIONS
 from sphjax.physics.pairs import Geometry
 from sphjax.physics.rhs import Context, evaluate, reference_pairs, update_neighbors
@@ -80,9 +83,18 @@ def fast_acceleration(solid: State, system: SolidSystem, pairs, ctx, reference=N
     return system.body_acceleration(view, elastic["a"], ctx.params)
 
 
-def kick_drift_kick(state: State, neighbors, dt, model, params):
-    """One split step of size ``dt`` (module docstring); returns ``(state, neighbors)``
-    like :func:`sphjax.integration.simulate.kick_drift_kick`."""
+@dataclasses.dataclass(frozen=True)
+class SplitStepper(KickDriftKickStepper):
+    """Kick-drift-kick with the solid of ``model`` sub-cycled ``substeps`` times inside
+    each step (module docstring); ``init`` is the plain stepper's."""
+
+    def step(self, carry, dt, params):
+        state, neighbors = carry
+        return split_step(state, neighbors, dt, self.model, params)
+
+
+def split_step(state: State, neighbors, dt, model, params):
+    """One split step of size ``dt`` (module docstring); returns ``(state, neighbors)``."""
     i = next(k for k, s in enumerate(model.systems) if isinstance(s, SolidSystem))
     system = model.systems[i]
     s = slice(*neighbors.blocks[i])
