@@ -162,11 +162,11 @@ def _check_against_autodiff(summand, shared, seed, fields=None):
 
 def test_density_pullbacks_equal_autodiff():
     """Eq. 5's kernel summand and eq. 11's velocity divergence."""
-    from sphjax.physics.fluid import system
+    from sphjax.physics.fluid import density
 
-    geometry, _, _ = _check_against_autodiff(system._kernel_summand, (), seed=11)
+    geometry, _, _ = _check_against_autodiff(density._kernel_summand, (), seed=11)
     assert float(jnp.max(jnp.abs(geometry[2]))) > 0
-    geometry, a, b = _check_against_autodiff(system._velocity_divergence_summand, (), seed=12)
+    geometry, a, b = _check_against_autodiff(density._velocity_divergence_summand, (), seed=12)
     assert float(jnp.max(jnp.abs(geometry[3]))) > 0 and float(jnp.max(jnp.abs(a["v"]))) > 0
 
 

@@ -23,10 +23,12 @@ correction is needed.  ``psi_ab = psi_ba`` and ``grad_a W_ab = -grad_b W_ba``, s
 from __future__ import annotations
 
 import dataclasses
+import functools
 
 import jax.numpy as jnp
 
 from sphjax.core.space import dot
+from sphjax.physics.fluid.density import continuity_term
 from sphjax.physics.fluid.viscosity import ETA2
 
 
@@ -74,6 +76,41 @@ def antuono_term(pair, density_a, density_b, gradient_a, gradient_b, volume_b, d
     return delta * h * c0 * term
 
 
+def _continuity_with_diffusion(pair, a, b, shared, *, h):
+    """Eq. 11 plus Molteni & Colagrossi's diffusion per pair, hydrostatic part removed."""
+    gravity, rho0, c0, delta = shared
+    rate = continuity_term(pair, b["m"], a["v"], b["v"])
+    hydrostatic = rho0 * sum(gravity[i] * pair.dr[..., i] for i in range(pair.dr.shape[-1])) / c0**2
+    volume_b = b["m"] / b["rho"]
+    return rate + molteni_term(pair, a["rho"], b["rho"], volume_b, hydrostatic, delta, h, c0)
+
+
+def _renormalisation_summand(pair, a, b, shared):
+    """Per pair, times the weight ``V_b``: the sums of the renormalised density gradient
+    (Antuono et al. 2010); symmetric under ``a <-> b``."""
+    return renormalisation_terms(pair, a["rho"], b["rho"])
+
+
+def _continuity_with_antuono(pair, a, b, shared, *, h):
+    """Eq. 11 plus Antuono et al.'s diffusion per pair, with the renormalised density
+    gradients ``a["grad_rho"]``, ``b["grad_rho"]`` of the update stage."""
+    c0, delta = shared
+    rate = continuity_term(pair, b["m"], a["v"], b["v"])
+    volume_b = b["m"] / b["rho"]
+    return rate + antuono_term(
+        pair, a["rho"], b["rho"], a["grad_rho"], b["grad_rho"], volume_b, delta, h, c0
+    )
+
+
+def density_gradient(fluid: dict, ctx):
+    """Renormalised density gradient ``<grad rho>_a`` over the fluid neighbours
+    (Antuono et al. 2010), ``[n, d]``: one pair sum (the matrix and the moment of
+    :func:`renormalisation_terms`), then a ``d x d`` solve per particle."""
+    rows = {"x": fluid["x"], "rho": fluid["rho"], "V": fluid["m"] / fluid["rho"]}
+    sums = ctx.pair_sum(_renormalisation_summand, rows, None, ctx.fluid_pairs, weight="V", parity=1)
+    return renormalised_gradient(sums["matrix"], sums["moment"])
+
+
 @dataclasses.dataclass(frozen=True)
 class MolteniColagrossi:
     """Molteni & Colagrossi (2009) delta-SPH with the hydrostatic correction;
@@ -81,6 +118,15 @@ class MolteniColagrossi:
 
     #: the Params fields the diffusion term and its hydrostatic correction read
     parameters = ("density_diffusion", "sound_speed", "reference_density", "gravity")
+
+    def continuity_rate(self, rows: dict, ctx):
+        """Eq. 11 with this diffusion over the fluid's own pairs (``rows``: ``x, m, v,
+        rho``)."""
+        fluid = ctx.params.fluid
+        summand = functools.partial(_continuity_with_diffusion, h=ctx.geometry.smoothing_length)
+        shared = (ctx.params.gravity, fluid.reference_density, fluid.sound_speed)
+        shared = (*shared, fluid.density_diffusion)
+        return ctx.pair_sum(summand, rows, None, ctx.fluid_pairs, shared)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -91,3 +137,12 @@ class Antuono:
 
     #: the Params fields the diffusion term reads
     parameters = ("density_diffusion", "sound_speed")
+
+    def continuity_rate(self, rows: dict, ctx):
+        """Eq. 11 with this diffusion over the fluid's own pairs, the renormalised
+        density gradients (:func:`density_gradient`) computed first."""
+        fluid = ctx.params.fluid
+        summand = functools.partial(_continuity_with_antuono, h=ctx.geometry.smoothing_length)
+        with_gradient = {**rows, "grad_rho": density_gradient(rows, ctx)}
+        shared = (fluid.sound_speed, fluid.density_diffusion)
+        return ctx.pair_sum(summand, with_gradient, None, ctx.fluid_pairs, shared)

@@ -19,30 +19,19 @@ density and velocity the boundary system provides.  The momentum terms are inter
 from __future__ import annotations
 
 import dataclasses
-import functools
 import math
 
-import jax.numpy as jnp
 import numpy as np
 
-from sphjax.core import kernels
 from sphjax.core.params import FLUID_DEFAULTS, fields_read, refusal
-from sphjax.core.space import scale
 from sphjax.core.state import Kind
-from sphjax.physics import pairs as pair_sums
 from sphjax.physics.fluid.density import (
     ContinuityDensity,
     SummationDensity,
-    continuity_term,
-    summation_term,
 )
 from sphjax.physics.fluid.density_diffusion import (
     Antuono,
     MolteniColagrossi,
-    antuono_term,
-    molteni_term,
-    renormalisation_terms,
-    renormalised_gradient,
 )
 from sphjax.physics.fluid.eos import TaitEOS
 from sphjax.physics.fluid.momentum import TransportVelocity
@@ -229,78 +218,6 @@ class FluidSystem:
         return acceleration + params.gravity
 
 
-def _kernel_summand(pair, a, b, shared):
-    """``W_ab``; times the weight ``m_b`` it is eq. 5's pair term."""
-    return summation_term(pair, 1.0)
-
-
-def _kernel_pullback(pair, a, b, shared, bar):
-    """Reverse mode of :func:`_kernel_summand`: ``W_ab`` gets the cotangent itself."""
-    cot = pair_sums.Cotangents()
-    cot.pair(w=bar)
-    return cot.result(len(shared))
-
-
-pair_sums.define_pullback(_kernel_summand, _kernel_pullback)
-# measured on the CPU: autodiff's transpose (9.6 ms) beats the custom adjoint (14.0 ms) at
-# Taylor-Green 10k (docs/performance_gradients.md); the pull-back stays, tested, for
-# `benchmarks/pair_costs.py` to re-measure on other hardware
-pair_sums.transpose_by_autodiff(_kernel_summand)
-
-
-def _velocity_divergence_summand(pair, a, b, shared):
-    """``(v_a - v_b) . grad_a W_ab``; times the weight ``m_b`` it is eq. 11's pair term."""
-    return continuity_term(pair, 1.0, a["v"], b["v"])
-
-
-def _velocity_divergence_pullback(pair, a, b, shared, bar):
-    """Reverse mode of :func:`_velocity_divergence_summand`: with ``s = v_ab . grad W``,
-    ``grad W`` gets ``bar v_ab``, ``v_a`` gets ``bar grad W`` and ``v_b`` its negative."""
-    cot = pair_sums.Cotangents()
-    flux = scale(bar, pair.grad_w)
-    cot.pair(grad_w=scale(bar, a["v"] - b["v"]))
-    cot.a(v=flux)
-    cot.b(v=-flux)
-    return cot.result(len(shared))
-
-
-pair_sums.define_pullback(_velocity_divergence_summand, _velocity_divergence_pullback)
-
-
-def _continuity_with_diffusion(pair, a, b, shared, *, h):
-    gravity, rho0, c0, delta = shared
-    rate = continuity_term(pair, b["m"], a["v"], b["v"])
-    hydrostatic = rho0 * sum(gravity[i] * pair.dr[..., i] for i in range(pair.dr.shape[-1])) / c0**2
-    volume_b = b["m"] / b["rho"]
-    return rate + molteni_term(pair, a["rho"], b["rho"], volume_b, hydrostatic, delta, h, c0)
-
-
-def _renormalisation_summand(pair, a, b, shared):
-    """Per pair, times the weight ``V_b``: the sums of the renormalised density gradient
-    (Antuono et al. 2010); symmetric under ``a <-> b``."""
-    return renormalisation_terms(pair, a["rho"], b["rho"])
-
-
-def _continuity_with_antuono(pair, a, b, shared, *, h):
-    """Eq. 11 plus Antuono et al.'s diffusion per pair, with the renormalised density
-    gradients ``a["grad_rho"]``, ``b["grad_rho"]`` of the update stage."""
-    c0, delta = shared
-    rate = continuity_term(pair, b["m"], a["v"], b["v"])
-    volume_b = b["m"] / b["rho"]
-    return rate + antuono_term(
-        pair, a["rho"], b["rho"], a["grad_rho"], b["grad_rho"], volume_b, delta, h, c0
-    )
-
-
-def density_gradient(fluid: dict, ctx):
-    """Renormalised density gradient ``<grad rho>_a`` over the fluid neighbours
-    (Antuono et al. 2010), ``[n, d]``: one pair sum (the matrix and the moment of
-    :func:`renormalisation_terms`), then a ``d x d`` solve per particle."""
-    rows = {"x": fluid["x"], "rho": fluid["rho"], "V": fluid["m"] / fluid["rho"]}
-    sums = ctx.pair_sum(_renormalisation_summand, rows, None, ctx.fluid_pairs, weight="V", parity=1)
-    return renormalised_gradient(sums["matrix"], sums["moment"])
-
-
 def update_fluid(system: FluidSystem, fluid: dict, boundaries, ctx, density_step=None):
     """Update stage of a fluid: density (eq. 5 or 11 with delta-SPH) and pressure (eq. 12).
 
@@ -313,43 +230,9 @@ def update_fluid(system: FluidSystem, fluid: dict, boundaries, ctx, density_step
     Returns:
       ``fluid`` with ``rho``, ``p`` and ``drho`` (the density rate, 0 for summation).
     """
-    params, geometry = ctx.params.fluid, ctx.geometry
     rows = {"x": fluid["x"], "m": fluid["m"], "v": fluid["v"], "rho": fluid["rho"]}
-    density, rate = fluid["rho"], jnp.zeros_like(fluid["rho"])
-    if isinstance(system.density, SummationDensity):
-        own = ctx.pair_sum(_kernel_summand, rows, None, ctx.fluid_pairs, weight="m", parity=1)
-        for cols, pairs in boundaries:
-            own = own + ctx.pair_sum(_kernel_summand, rows, _boundary(cols), pairs, weight="m")
-        self_weight = kernels.W(geometry.kernel, 0.0, geometry.smoothing_length, geometry.dim)
-        density = fluid["m"] * self_weight + own
-    else:
-        if system.density_diffusion is None:
-            rate = ctx.pair_sum(
-                _velocity_divergence_summand, rows, None, ctx.fluid_pairs, weight="m", parity=1
-            )
-        elif isinstance(system.density_diffusion, Antuono):
-            summand = functools.partial(_continuity_with_antuono, h=geometry.smoothing_length)
-            with_gradient = {**rows, "grad_rho": density_gradient(fluid, ctx)}
-            shared = (params.sound_speed, params.density_diffusion)
-            rate = ctx.pair_sum(summand, with_gradient, None, ctx.fluid_pairs, shared)
-        else:
-            summand = functools.partial(_continuity_with_diffusion, h=geometry.smoothing_length)
-            shared = (
-                ctx.params.gravity,
-                params.reference_density,
-                params.sound_speed,
-                params.density_diffusion,
-            )
-            rate = ctx.pair_sum(summand, rows, None, ctx.fluid_pairs, shared)
-        for cols, pairs in boundaries:
-            rate = rate + ctx.pair_sum(
-                _velocity_divergence_summand, rows, _boundary(cols), pairs, weight="m"
-            )
-        if density_step is not None:
-            density = density + density_step * rate
-    pressure = system.equation_of_state.pressure(density, params)
+    density, rate = system.density.density_and_rate(
+        rows, boundaries, ctx, system.density_diffusion, density_step
+    )
+    pressure = system.equation_of_state.pressure(density, ctx.params.fluid)
     return {**fluid, "rho": density, "p": pressure, "drho": rate}
-
-
-def _boundary(fields):
-    return {"x": fields["x"], "m": fields["m"], "v": fields["v"]}
