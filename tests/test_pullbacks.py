@@ -79,7 +79,9 @@ def test_hydrodynamic_pullback_equals_autodiff(artificial, morris, stress, shift
     pair = _pairs(keys[0])
     shape = (N_ROWS, N_NEIGHBOURS)
     a, b = _fields(keys[1], shape), _fields(keys[2], shape)
-    shared = tuple(jnp.asarray(v) for v in (10.0, 0.3, 0.2, 0.05, 4.0))
+    shared = interactions.FluidPairParameters(
+        *(jnp.asarray(v) for v in (10.0, 0.3, 0.2, 0.05, 4.0))
+    )
     out = summand(pair, a, b, shared)
     bar = jax.tree_util.tree_map(
         lambda o, k: jax.random.normal(k, o.shape),
@@ -191,7 +193,7 @@ def test_solid_pullbacks_equal_autodiff(penalty):
 
     domain = Domain(lower=(0.0, 0.0), upper=(3.0, 3.0), periodic=(True, False))
     momentum = functools.partial(interactions._solid_summand, domain=domain, penalty=penalty)
-    shared = tuple(jnp.asarray(v) for v in (1000.0, 2.0e6, 0.1))
+    shared = interactions.SolidPairParameters(*(jnp.asarray(v) for v in (1000.0, 2.0e6, 0.1)))
     _, a, _ = _check_against_autodiff(momentum, shared, 21 + penalty, _solid_fields)
     assert float(jnp.max(jnp.abs(a["PL0"]))) > 0
     assert penalty == (float(jnp.max(jnp.abs(a["F"]))) > 0)
@@ -245,7 +247,7 @@ def test_stored_reference_geometry_equals_computed(adjoint):
         "F": jnp.eye(DIM) + 0.1 * jax.random.normal(keys[3], (n, DIM, DIM)),
         "L0": jnp.eye(DIM) + 0.1 * jax.random.normal(keys[4], (n, DIM, DIM)),
     }
-    shared = tuple(jnp.asarray(v) for v in (1000.0, 2.0e6, 0.1))
+    shared = interactions.SolidPairParameters(*(jnp.asarray(v) for v in (1000.0, 2.0e6, 0.1)))
     domain = model.domain
     pair_sums.define_pullback(_unmarked_deformation, _unmarked_deformation_pullback)
     sums = [

@@ -23,6 +23,7 @@ Each function returns a dict with ``"a"`` (``[n_A, d]``) and, for fluids, ``"shi
 from __future__ import annotations
 
 import functools
+from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
@@ -58,7 +59,8 @@ def _hydrodynamic_summand(pair, a, b, shared, *, h, artificial, morris, stress, 
     ``viscous``: whether the pair takes part in the viscous terms (no-slip walls and
     fluid neighbours do, free-slip walls do not); ``b["vv"]`` is the velocity they see.
     """
-    c0, alpha, beta, nu, p_transport = shared
+    c0, alpha, beta = shared.sound_speed, shared.artificial_alpha, shared.artificial_beta
+    nu, p_transport = shared.kinematic_viscosity, shared.transport_pressure
     unit = jnp.ones_like(pair.r)
     out = {}
     pi_ab = 0.0
@@ -88,7 +90,8 @@ def _hydrodynamic_pullback(
     the pair geometry ``(r_ab, |r_ab|, W, grad_a W)``, of ``a``'s and ``b``'s fields and of
     the parameters, for the cotangent ``bar`` of the summand's output (see
     :func:`sphjax.physics.pairs.define_pullback`)."""
-    c0, alpha, beta, nu, p_transport = shared
+    c0, alpha, beta = shared.sound_speed, shared.artificial_alpha, shared.artificial_beta
+    nu, p_transport = shared.kinematic_viscosity, shared.transport_pressure
     unit = jnp.ones_like(pair.r)
     cot = pair_sums.Cotangents()
     v_ab = a["v"] - b["vv"]
@@ -107,9 +110,9 @@ def _hydrodynamic_pullback(
         cot.pair(dr=pi["dr"], r=pi["r"])
         cot.a(rho=pi["density_a"])
         cot.b(rho=pi["density_b"])
-        cot.shared(0, pi["sound_speed"])
-        cot.shared(1, pi["alpha"])
-        cot.shared(2, pi["beta"])
+        cot.shared("sound_speed", pi["sound_speed"])
+        cot.shared("artificial_alpha", pi["alpha"])
+        cot.shared("artificial_beta", pi["beta"])
         v_ab_bar = v_ab_bar + pi["v_ab"]
     if morris and viscous:
         viscous_bar = morris_acceleration_pullback(
@@ -118,7 +121,7 @@ def _hydrodynamic_pullback(
         cot.pair(dr=viscous_bar["dr"], r=viscous_bar["r"], grad_w=viscous_bar["grad_w"])
         cot.a(i=viscous_bar["inverse_density"])
         cot.b(i=viscous_bar["inverse_density"])
-        cot.shared(3, viscous_bar["nu"])
+        cot.shared("kinematic_viscosity", viscous_bar["nu"])
         v_ab_bar = v_ab_bar + viscous_bar["v_ab"]
     if stress:
         flux = transport_stress_acceleration_pullback(
@@ -138,25 +141,35 @@ def _hydrodynamic_pullback(
         cot.pair(grad_w=background["grad_w"])
         cot.a(i=2.0 * p_transport * a["i"] * coefficient_bar)
         cot.b(i=2.0 * p_transport * b["i"] * coefficient_bar)
-        cot.shared(4, (a["i"] ** 2 + b["i"] ** 2) * coefficient_bar)
-    return cot.result(len(shared))
+        cot.shared("transport_pressure", (a["i"] ** 2 + b["i"] ** 2) * coefficient_bar)
+    return cot.result(shared)
 
 
 pair_sums.define_pullback(_hydrodynamic_summand, _hydrodynamic_pullback)
 
 
-def _fluid_shared(system: FluidSystem, ctx):
+class FluidPairParameters(NamedTuple):
+    """The parameters every fluid pair sees (``pair_sum``'s ``shared``), by name."""
+
+    sound_speed: object
+    artificial_alpha: object
+    artificial_beta: object
+    kinematic_viscosity: object
+    #: the transport-velocity background pressure ``p_b`` (0 without it)
+    transport_pressure: object
+
+
+def _fluid_shared(system: FluidSystem, ctx) -> FluidPairParameters:
     """The parameters every fluid pair sees; the transport-velocity background pressure
     ``p_b`` is derived from them here (it follows ``sound_speed``)."""
     fluid = ctx.params.fluid
     tvf = system.transport_velocity
-    p_transport = 0.0 if tvf is None else tvf.background_pressure(fluid)
-    return (
-        fluid.sound_speed,
-        fluid.artificial_alpha,
-        fluid.artificial_beta,
-        fluid.kinematic_viscosity,
-        p_transport,
+    return FluidPairParameters(
+        sound_speed=fluid.sound_speed,
+        artificial_alpha=fluid.artificial_alpha,
+        artificial_beta=fluid.artificial_beta,
+        kinematic_viscosity=fluid.kinematic_viscosity,
+        transport_pressure=0.0 if tvf is None else tvf.background_pressure(fluid),
     )
 
 
@@ -197,11 +210,19 @@ def fluid_wall(system: FluidSystem, fluid, wall_system: WallSystem, wall, pairs,
     return ctx.pair_sum(summand, rows, cols, pairs, _fluid_shared(system, ctx), weight="m")
 
 
+class SolidPairParameters(NamedTuple):
+    """The parameters every solid pair sees (``pair_sum``'s ``shared``), by name."""
+
+    solid_density: object
+    young_modulus: object
+    penalty_alpha: object
+
+
 def _solid_summand(pair, a, b, shared, *, domain, penalty):
     """Eq. 14 per pair per unit neighbour volume (``pair_sum`` multiplies by ``V0_b``):
     ``(P_a L0_a + P_b L0_b) / rho0 grad0_a W`` plus the penalty force ``f^PF / (m0_a V0_b)``;
     antisymmetric under ``a <-> b``."""
-    rho0, young_modulus, alpha = shared
+    rho0, young_modulus, alpha = shared.solid_density, shared.young_modulus, shared.penalty_alpha
     acceleration = _matvec((a["PL0"] + b["PL0"]) / rho0, pair.grad_w)
     if penalty:
         dx = displacement_fn(domain)(a["xc"], b["xc"]) * pair.mask[..., None]
@@ -220,7 +241,7 @@ def _solid_pullback(pair, a, b, shared, bar, *, domain, penalty):
 
     the penalty force's, when present, is autodiff's (``jax.vjp`` of
     :func:`~sphjax.physics.solid.penalty.penalty_force`)."""
-    rho0, young_modulus, alpha = shared
+    rho0, young_modulus, alpha = shared.solid_density, shared.young_modulus, shared.penalty_alpha
     acceleration_bar = bar["a"]
     stress = a["PL0"] + b["PL0"]
     elastic = _matvec(stress, pair.grad_w)
@@ -229,7 +250,7 @@ def _solid_pullback(pair, a, b, shared, bar, *, domain, penalty):
     cot.pair(grad_w=_matvec(jnp.swapaxes(stress, -1, -2), acceleration_bar) / rho0)
     cot.a(PL0=stress_bar)
     cot.b(PL0=stress_bar)
-    cot.shared(0, -jnp.sum(acceleration_bar * elastic, axis=-1) / rho0**2)
+    cot.shared("solid_density", -jnp.sum(acceleration_bar * elastic, axis=-1) / rho0**2)
     if penalty:
 
         def force(geometry, xc_a, xc_b, F_a, F_b, young_modulus, alpha, rho0):
@@ -249,10 +270,10 @@ def _solid_pullback(pair, a, b, shared, bar, *, domain, penalty):
         cot.pair(dr=dr, r=r, w=w, grad_w=grad_w)
         cot.a(xc=xc_a, F=F_a)
         cot.b(xc=xc_b, F=F_b)
-        cot.shared(0, rho0_bar)
-        cot.shared(1, e_bar)
-        cot.shared(2, alpha_bar)
-    return cot.result(len(shared))
+        cot.shared("solid_density", rho0_bar)
+        cot.shared("young_modulus", e_bar)
+        cot.shared("penalty_alpha", alpha_bar)
+    return cot.result(shared)
 
 
 pair_sums.define_pullback(_solid_summand, _solid_pullback)
@@ -275,7 +296,7 @@ def solid_solid(system: SolidSystem, solid, _other, _solid, pairs, ctx):
         "PL0": solid["PL0"],
         "F": solid["F"],
     }
-    shared = (params.solid_density, params.young_modulus, params.penalty_alpha)
+    shared = SolidPairParameters(params.solid_density, params.young_modulus, params.penalty_alpha)
     return ctx.pair_sum(summand, rows, None, pairs, shared, weight="V", parity=-1)
 
 

@@ -274,14 +274,19 @@ class Cotangents:
         """Add cotangents of the neighbour's fields."""
         self._add(self._b, cotangents)
 
-    def shared(self, index: int, cotangent):
-        """Add the cotangent of leaf ``index`` of the shared parameters."""
-        self._add(self._shared, {index: cotangent})
+    def shared(self, key: int | str, cotangent):
+        """Add the cotangent of the shared parameter ``key``: its field name where the
+        shared parameters are a NamedTuple (``"sound_speed"``), else its leaf index."""
+        self._add(self._shared, {key: cotangent})
 
-    def result(self, n_shared: int):
+    def result(self, shared):
+        """``(pair, a, b, shared)`` cotangents; ``shared``: the summand's shared
+        parameters (or their number), whose cotangents come out as a list of leaves."""
         pair = tuple(self._pair.get(k, 0.0) for k in ("dr", "r", "w", "grad_w"))
-        shared = [self._shared.get(i, 0.0) for i in range(n_shared)]
-        return pair, dict(self._a), dict(self._b), shared
+        names = getattr(shared, "_fields", None) or ()
+        n_shared = shared if isinstance(shared, int) else len(shared)
+        keys = [names[i] if i < len(names) else i for i in range(n_shared)]
+        return pair, dict(self._a), dict(self._b), [self._shared.get(k, 0.0) for k in keys]
 
 
 def _contract(out, bar):

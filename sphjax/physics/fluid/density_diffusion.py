@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+from typing import NamedTuple
 
 import jax.numpy as jnp
 
@@ -76,9 +77,26 @@ def antuono_term(pair, density_a, density_b, gradient_a, gradient_b, volume_b, d
     return delta * h * c0 * term
 
 
+class MolteniParameters(NamedTuple):
+    """What every pair of :func:`_continuity_with_diffusion` sees, by name."""
+
+    gravity: object
+    reference_density: object
+    sound_speed: object
+    density_diffusion: object
+
+
+class AntuonoParameters(NamedTuple):
+    """What every pair of :func:`_continuity_with_antuono` sees, by name."""
+
+    sound_speed: object
+    density_diffusion: object
+
+
 def _continuity_with_diffusion(pair, a, b, shared, *, h):
     """Eq. 11 plus Molteni & Colagrossi's diffusion per pair, hydrostatic part removed."""
-    gravity, rho0, c0, delta = shared
+    gravity, rho0 = shared.gravity, shared.reference_density
+    c0, delta = shared.sound_speed, shared.density_diffusion
     rate = continuity_term(pair, b["m"], a["v"], b["v"])
     hydrostatic = rho0 * sum(gravity[i] * pair.dr[..., i] for i in range(pair.dr.shape[-1])) / c0**2
     volume_b = b["m"] / b["rho"]
@@ -94,7 +112,7 @@ def _renormalisation_summand(pair, a, b, shared):
 def _continuity_with_antuono(pair, a, b, shared, *, h):
     """Eq. 11 plus Antuono et al.'s diffusion per pair, with the renormalised density
     gradients ``a["grad_rho"]``, ``b["grad_rho"]`` of the update stage."""
-    c0, delta = shared
+    c0, delta = shared.sound_speed, shared.density_diffusion
     rate = continuity_term(pair, b["m"], a["v"], b["v"])
     volume_b = b["m"] / b["rho"]
     return rate + antuono_term(
@@ -124,8 +142,9 @@ class MolteniColagrossi:
         rho``)."""
         fluid = ctx.params.fluid
         summand = functools.partial(_continuity_with_diffusion, h=ctx.geometry.smoothing_length)
-        shared = (ctx.params.gravity, fluid.reference_density, fluid.sound_speed)
-        shared = (*shared, fluid.density_diffusion)
+        shared = MolteniParameters(
+            ctx.params.gravity, fluid.reference_density, fluid.sound_speed, fluid.density_diffusion
+        )
         return ctx.pair_sum(summand, rows, None, ctx.fluid_pairs, shared)
 
 
@@ -144,5 +163,5 @@ class Antuono:
         fluid = ctx.params.fluid
         summand = functools.partial(_continuity_with_antuono, h=ctx.geometry.smoothing_length)
         with_gradient = {**rows, "grad_rho": density_gradient(rows, ctx)}
-        shared = (fluid.sound_speed, fluid.density_diffusion)
+        shared = AntuonoParameters(fluid.sound_speed, fluid.density_diffusion)
         return ctx.pair_sum(summand, with_gradient, None, ctx.fluid_pairs, shared)
