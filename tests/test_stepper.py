@@ -44,3 +44,22 @@ def test_a_loop_over_the_stepper_is_simulate(make):
         np.testing.assert_allclose(
             carry[0].velocity, trajectory.states.velocity[k], rtol=1e-5, atol=1e-6
         )
+
+
+def test_a_traced_overflow_is_recognised_through_jaxs_wrapping():
+    """Inside ``jit`` the lists cannot be re-allocated: the run raises, and whoever catches
+    it (the dataset runner re-allocates) recognises the overflow by one rule."""
+    from sphjax.integration.simulate import NeighborOverflowError, is_neighbor_overflow
+
+    case = cases.dam_break(n=8)
+
+    def run(squeeze):
+        # a traced run sizes its lists from case.state; this state is twice as dense
+        state = case.state.replace(position=squeeze * case.state.position)
+        return sphjax.simulate(case, state=state, n_steps=3).states.position[-1, 0, 0]
+
+    with pytest.raises(Exception) as caught:
+        jax.block_until_ready(jax.jit(run)(0.7))
+    assert is_neighbor_overflow(caught.value)
+    assert not is_neighbor_overflow(ValueError("dt must be a positive number"))
+    assert is_neighbor_overflow(NeighborOverflowError("any words"))

@@ -15,7 +15,7 @@ import numpy as np
 from sphjax.core.case import Case
 from sphjax.core.params import Params
 from sphjax.core.state import State
-from sphjax.integration.simulate import simulate
+from sphjax.integration.simulate import is_neighbor_overflow, simulate
 
 
 class Runner:
@@ -60,7 +60,7 @@ class Runner:
                 out = np.asarray(jax.block_until_ready(out))
                 break
             except Exception as error:  # raised from a callback inside the compiled run
-                if "neighbour list overflowed" not in str(error):
+                if not is_neighbor_overflow(error):
                     raise
                 model = self.case.model
                 self.case = self.case.replace(

@@ -11,6 +11,7 @@ import jax.numpy as jnp
 
 from sphjax.core.pytree import pytree_dataclass
 from sphjax.core.state import State
+from sphjax.integration.simulate import NeighborOverflowError
 from sphjax.integration.step import held_in_place
 from sphjax.physics.rhs import Neighbors, evaluate, overflowed, update_neighbors
 
@@ -57,7 +58,7 @@ class SPHArgs:
 
 
 _OVERFLOW_MESSAGE = (
-    "the neighbour list overflowed inside the diffrax vector field, where it cannot be "
+    f"{NeighborOverflowError.MARK} inside the diffrax vector field, where it cannot be "
     "re-allocated; raise Model.neighbor_capacity (e.g. "
     "case.replace(model=case.model.replace(neighbor_capacity=2.0)))"
 )

@@ -58,7 +58,20 @@ class SimulationError(RuntimeError):
 
 
 class NeighborOverflowError(RuntimeError):
-    """The neighbour list ran out of room where it cannot be re-allocated."""
+    """The neighbour list ran out of room where it cannot be re-allocated.
+
+    Raised from inside a compiled run (a traced ``simulate``, the diffrax term) it reaches
+    the caller wrapped in JAX's runtime error, its type lost: :func:`is_neighbor_overflow`
+    recognises it either way, by its message's :attr:`MARK`."""
+
+    #: the words every neighbour-overflow message contains
+    MARK = "the neighbour list overflowed"
+
+
+def is_neighbor_overflow(error: BaseException) -> bool:
+    """Whether ``error`` is a neighbour-list overflow, raised here or from inside a
+    compiled computation (where JAX re-raises it as its own runtime error)."""
+    return isinstance(error, NeighborOverflowError) or NeighborOverflowError.MARK in str(error)
 
 
 class NeighborOverflowWarning(UserWarning):
@@ -274,7 +287,7 @@ def _raise_failure(failure, dt, order=None):
 def _raise_overflow(overflow):
     if bool(overflow):
         raise NeighborOverflowError(
-            "the neighbour list overflowed inside a traced (jit/grad/vmap) simulation, where it "
+            f"{NeighborOverflowError.MARK} inside a traced (jit/grad/vmap) simulation, where it "
             "cannot be re-allocated; raise Model.neighbor_capacity (e.g. "
             "case.replace(model=case.model.replace(neighbor_capacity=2.0)))"
         )
