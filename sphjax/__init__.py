@@ -64,6 +64,7 @@ _NAMES = {
     "PenaltyForce": "sphjax.physics.solid.penalty",
     "SolidSystem": "sphjax.physics.solid.system",
     "SolidBoundary": "sphjax.physics.solid.boundary",
+    "RigidSystem": "sphjax.physics.rigid.system",
 }
 _MODULES = {"kernels": "sphjax.core.kernels"}
 
@@ -123,6 +124,7 @@ __all__ = [
     "Params",
     "PenaltyForce",
     "read_trajectory",
+    "RigidSystem",
     "simulate",
     "SimulationError",
     "SolidParams",

@@ -38,6 +38,7 @@ from sphjax.cases.fsi import (
     midspan_deflection,
     plate_deflection_reference,
 )
+from sphjax.cases.rigid import body_bottom, floating_body
 from sphjax.cases.setup_file import SetupError, from_toml
 from sphjax.cases.solid import (
     oscillating_plate,
@@ -146,4 +147,6 @@ __all__ = [
     "dam_break_elastic_obstacle",
     "midspan_deflection",
     "plate_deflection_reference",
+    "floating_body",
+    "body_bottom",
 ]

@@ -28,6 +28,7 @@ class Kind(enum.IntEnum):
     WALL = 1  # boundary dummy particle (Adami et al. 2012); fixed, velocity = wall surface's
     SOLID = 2  # total-Lagrangian elastic solid particle (SolidSystem)
     CLAMPED = 3  # solid particle whose motion is prescribed (fixed by default; SolidSystem)
+    RIGID = 4  # particle of a rigid body (RigidSystem)
 
 
 @pytree_dataclass

@@ -45,6 +45,7 @@ from sphjax.physics.fluid.viscosity import (
     morris_acceleration,
     morris_acceleration_pullback,
 )
+from sphjax.physics.rigid.system import RigidSystem
 from sphjax.physics.solid.penalty import penalty_force
 from sphjax.physics.solid.system import SolidSystem
 
@@ -350,6 +351,9 @@ INTERACTIONS = {
     (SolidSystem, SolidSystem): solid_solid,
     (FluidSystem, SolidSystem): fluid_solid,
     (SolidSystem, FluidSystem): solid_fluid,
+    # a rigid body is a moving boundary for the fluid as an elastic solid is
+    (FluidSystem, RigidSystem): fluid_solid,
+    (RigidSystem, FluidSystem): solid_fluid,
 }
 
 #: pairs of system types whose neighbour lists the update stage needs besides those of

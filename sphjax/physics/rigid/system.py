@@ -1,0 +1,154 @@
+"""A rigid body (2D): particles that move as one body, pushed by the fluid around it.
+
+The body is a set of particles (kind ``RIGID``) of volumes ``V_i`` and masses
+``m_i = rho_b V_i`` (``rho_b``: ``Params.solid_density``, the body's density).  With
+``r_i = x_i - X`` its particles' positions about its centre of mass,
+
+    M = sum_i m_i,  X = sum_i m_i x_i / M,  I = sum_i m_i |r_i|^2,
+    V = sum_i m_i v_i / M,  omega = sum_i m_i (r_i x v_i) / I,
+
+the forces ``f_i = m_i a_i`` of its interactions (the fluid's pressure and viscous forces,
+equal and opposite to the body's on the fluid) and gravity give
+
+    F = sum_i f_i + M g,   tau = sum_i r_i x f_i,   A = F / M,   alpha = tau / I,
+
+and every particle takes the acceleration of that rigid motion,
+
+    a_i = A + alpha e_z x r_i - omega^2 r_i,
+
+which the integrators' kicks and drift apply particle by particle (exact for a
+translation; for a rotation the particles' distances change at second order in
+``omega dt`` per step).
+
+A fluid sees the body's particles as moving boundary particles, exactly as an elastic
+solid's (Adami, Hu & Adams 2012; :mod:`sphjax.physics.fsi`): pressure extrapolated from
+the fluid, hydrodynamic mass ``rho0_fluid V_i``, the body's velocity in the no-slip
+terms; the interactions are the elastic solid's ``fluid_solid`` and ``solid_fluid``,
+registered for this system.  Not yet: contact with walls or other bodies, 3D.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import jax.numpy as jnp
+
+from sphjax.core.params import SOLID_DEFAULTS, refusal
+from sphjax.core.state import Kind
+from sphjax.physics import fsi
+from sphjax.physics.fluid.system import FluidSystem
+from sphjax.physics.solid.boundary import SolidBoundary
+from sphjax.physics.system import block_fields
+
+
+def _cross(r, v):
+    """``r x v`` (its z component) for ``[..., 2]`` vectors."""
+    return r[..., 0] * v[..., 1] - r[..., 1] * v[..., 0]
+
+
+def _perp(r):
+    """``e_z x r``."""
+    return jnp.stack([-r[..., 1], r[..., 0]], axis=-1)
+
+
+def rigid_motion(x, v, m):
+    """``(X, V, omega, r, I)`` of particles ``x, v`` of masses ``m`` (see the module)."""
+    M = jnp.sum(m)
+    X = jnp.sum(m[:, None] * x, axis=0) / M
+    r = x - X
+    I = jnp.sum(m * jnp.sum(r * r, axis=-1))
+    V = jnp.sum(m[:, None] * v, axis=0) / M
+    omega = jnp.sum(m * _cross(r, v - V)) / I
+    return X, V, omega, r, I
+
+
+def rigid_acceleration(x, v, m, force, gravity):
+    """``a_i = A + alpha e_z x r_i - omega^2 r_i`` for the particle forces ``force``
+    (``[n, 2]``) and gravity: the accelerations of the rigid motion the resultant force and
+    torque give the body (module docstring)."""
+    _, _, omega, r, I = rigid_motion(x, v, m)
+    M = jnp.sum(m)
+    A = jnp.sum(force, axis=0) / M + gravity
+    alpha = jnp.sum(_cross(r, force)) / I
+    return A + alpha * _perp(r) - omega**2 * r
+
+
+@dataclasses.dataclass(frozen=True)
+class RigidSystem:
+    """A rigid body (kind ``RIGID``, 2D); its density is ``Params.solid_density``.
+
+    Attributes:
+      boundary: :class:`~sphjax.SolidBoundary`, how a fluid sees the body (no-slip or free
+        slip; ``acceleration=True`` uses the body's acceleration in the extrapolated
+        pressure).
+    """
+
+    boundary: SolidBoundary = SolidBoundary()
+
+    kinds = (Kind.RIGID,)
+    current_configuration = True
+    #: after the fluid, whose pressure it extrapolates
+    stage = 2
+    params_group = "solid"
+    free_kinds = (Kind.RIGID,)
+
+    def __post_init__(self):
+        if not isinstance(self.boundary, SolidBoundary):
+            raise ValueError(
+                f"RigidSystem.boundary must be SolidBoundary(...), got {self.boundary!r}"
+            )
+
+    def parameters(self) -> frozenset[str]:
+        """``gravity`` and ``solid_density`` (the body's density)."""
+        return frozenset({"gravity", "solid_density"})
+
+    def unused_parameters(self) -> dict[str, str]:
+        """The elastic solid's fields: a rigid body has none of them."""
+        return {
+            name: refusal(name, "rigid body", "it does not deform", "use a SolidSystem")
+            for name in SOLID_DEFAULTS
+            if name not in self.parameters()
+        }
+
+    def replace(self, **changes) -> RigidSystem:
+        return dataclasses.replace(self, **changes)
+
+    # the system protocol (sphjax.physics.system)
+
+    def view(self, state, block: slice, density_step=None) -> dict:
+        """``x, v, rho``, the volumes ``V`` and ``a``, the acceleration of the last
+        evaluation (the extrapolated pressure may read it)."""
+        view = block_fields(state, block)
+        view.update(V=state.volume[block], a=state.acceleration[block])
+        return view
+
+    def boundary_view(self, view: dict, params) -> dict:
+        """A fluid sees the body's particles with their hydrodynamic mass."""
+        return fsi.fluid_view_of_solid(view, params.fluid)
+
+    def update(self, i: int, views: list, systems: tuple, pairs: dict, ctx, density_step=None):
+        """Masses ``rho_b V`` from Params, then the boundary pressure, density and viscous
+        velocity from each fluid (:func:`sphjax.physics.fsi.update_solid_boundary`)."""
+        view = {**views[i], "m": ctx.params.solid.solid_density * views[i]["V"]}
+        for j, fluid in enumerate(systems):
+            if (i, j) in pairs and isinstance(fluid, FluidSystem):
+                view = fsi.update_solid_boundary(self, view, fluid, views[j], pairs[(i, j)], ctx)
+        return view
+
+    def body_acceleration(self, view: dict, acceleration, params):
+        """The rigid motion's particle accelerations (module docstring) for the forces
+        ``m_i a_i`` of the interactions and gravity."""
+        m = view["m"]
+        force = m[:, None] * acceleration
+        return rigid_acceleration(view["x"], view["v"], m, force, params.gravity)
+
+    def held_kinds(self) -> tuple:
+        return ()
+
+    def prescribed_motion(self, time, state):
+        return None
+
+    def time_step_limits(self, v_max: float, params, model, cfl: float) -> list[float]:
+        """None of its own: the fluid's acoustic limit covers it (``v_max`` enters the
+        fluid's)."""
+        return []
