@@ -2,7 +2,9 @@
 
 * ``simulate`` under ``grad``, ``value_and_grad``, ``jvp`` and ``vmap`` w.r.t. Params and
   the initial State;
-* reverse-mode memory: with ``checkpoint_every`` 4x the steps take at most 2x the memory;
+* reverse-mode memory: with ``checkpoint_every`` 4x the steps take at most 2x the memory,
+  and past ``MAX_STORED_CHUNKS`` chunks (nested checkpointing) 100x the steps at most 1.5x;
+  nested checkpointing gives the gradient of one level of chunks to round-off;
 * no NaN gradients at coincident particles, at the artificial-viscosity switch
   (``v_ab . r_ab = 0``) and at the clip of the inverse equation of state;
 * gradient correctness against central finite differences (acceptance numbers of the
@@ -22,7 +24,7 @@ from sphjax import Kind
 
 
 def kinetic_energy(state):
-    return 0.5 * jnp.sum(state.mass[:, None] * state.velocity**2)
+    return 0.5 * jnp.sum(state.mass[..., None] * state.velocity**2)
 
 
 def soft_surge_front(state, case):
@@ -264,15 +266,16 @@ def test_second_derivative_through_hand_adjoint_names_the_switch():
 # ----------------------------------------------------------------- no NaN gradients
 
 
-def _reverse_mode_scratch_bytes(case, n_steps, checkpoint_every):
-    """XLA's scratch memory for ``jax.grad`` of KE(after ``n_steps``) w.r.t. nu."""
+def _reverse_mode_scratch_bytes(case, n_steps, checkpoint_every, save_every=None):
+    """XLA's scratch memory for ``jax.grad`` of the summed KE of the frames (by default
+    only the last) after ``n_steps`` w.r.t. nu."""
 
     def loss(nu):
         params = case.params.replace(kinematic_viscosity=nu)
-        final = sphjax.simulate(
-            case, params, n_steps=n_steps, checkpoint_every=checkpoint_every
-        ).final
-        return kinetic_energy(final)
+        states = sphjax.simulate(
+            case, params, n_steps=n_steps, checkpoint_every=checkpoint_every, save_every=save_every
+        ).states
+        return kinetic_energy(states)
 
     compiled = jax.jit(jax.grad(loss)).lower(case.params.kinematic_viscosity).compile()
     return compiled.memory_analysis().temp_size_in_bytes
@@ -288,6 +291,67 @@ def test_checkpointing_keeps_reverse_mode_memory_from_growing_with_every_step():
     print(f"scratch bytes, 400 -> 1600 steps: chunks of 40 {chunked}, per step {per_step}")
     assert chunked[1] <= 2.0 * chunked[0]
     assert per_step[1] >= 3.0 * per_step[0]
+
+
+def test_nested_checkpointing_keeps_reverse_mode_memory_flat():
+    """The memory issue: past ``MAX_STORED_CHUNKS`` chunks the chunks are checkpointed in
+    groups too, so 2,000 steps in chunks of 5 (400 chunks) take at most 1.5x the scratch
+    memory of 20 steps (4 chunks); one stored carry per chunk took 6x."""
+    case = sphjax.cases.taylor_green(n=8)
+    scratch = [_reverse_mode_scratch_bytes(case, n, 5) for n in (20, 2000)]
+    print(f"scratch bytes, 4 -> 400 chunks of 5 steps: {scratch}")
+    assert scratch[1] <= 1.5 * scratch[0]
+
+
+def test_nested_checkpointing_gradient_equals_one_level(monkeypatch):
+    """Groups of chunks (17 chunks: 3 groups of 5 and one of 2) and one scan of all the
+    chunks (the bound raised) give the same gradient to round-off, with walls (several
+    neighbour lists)."""
+    from sphjax.integration import simulate as simulate_module
+
+    case = sphjax.cases.dam_break(n=8)
+    alpha0 = case.params.artificial_alpha
+
+    def grad():
+        def loss(alpha):
+            params = case.params.replace(artificial_alpha=alpha)
+            final = sphjax.simulate(case, params, n_steps=34, checkpoint_every=2).final
+            return soft_surge_front(final, case)
+
+        return float(jax.jit(jax.grad(loss))(alpha0))
+
+    nested = grad()
+    monkeypatch.setattr(simulate_module, "MAX_STORED_CHUNKS", 10**6)
+    one_level = grad()
+    assert nested != 0.0
+    assert abs(nested - one_level) <= 1e-12 * abs(one_level)
+
+
+def test_nested_checkpointing_of_saved_frames(monkeypatch):
+    """Many saved frames, each one chunk, are checkpointed in groups of frames too: less
+    scratch memory than one stored carry per frame, and the same gradient (here 43 frames
+    of 5 steps in groups of 7, the last group of 1 frame)."""
+    from sphjax.integration import simulate as simulate_module
+
+    case = sphjax.cases.taylor_green(n=8)
+    nu0 = case.params.kinematic_viscosity
+
+    def grad():
+        def loss(nu):
+            params = case.params.replace(kinematic_viscosity=nu)
+            states = sphjax.simulate(
+                case, params, n_steps=215, save_every=5, checkpoint_every=5
+            ).states
+            return kinetic_energy(states)
+
+        return float(jax.jit(jax.grad(loss))(nu0))
+
+    nested = [grad(), _reverse_mode_scratch_bytes(case, 2000, 5, save_every=5)]
+    monkeypatch.setattr(simulate_module, "MAX_STORED_CHUNKS", 10**6)
+    one_level = [grad(), _reverse_mode_scratch_bytes(case, 2000, 5, save_every=5)]
+    print(f"scratch bytes, 400 frames: nested {nested[1]}, one level {one_level[1]}")
+    assert abs(nested[0] - one_level[0]) <= 1e-12 * abs(one_level[0])
+    assert nested[1] <= 0.6 * one_level[1]
 
 
 def test_no_nan_gradients_at_coincident_particles_and_switches():

@@ -84,6 +84,11 @@ class NeighborOverflowWarning(UserWarning):
 #: ``Model.neighbor_capacity``
 NEIGHBOR_MARGIN = 0.05
 
+#: the most chunk carries (``checkpoint_every``) one level of reverse mode stores; runs
+#: (and frames) with more chunks are checkpointed in groups of chunks (frames) too
+#: (:func:`_nested_scan`)
+MAX_STORED_CHUNKS = 16
+
 _KEEP_UPDATE = jax.checkpoint_policies.save_only_these_names(UPDATE_FIELDS)
 _KEEP_NEIGHBOR_IDX = jax.checkpoint_policies.save_only_these_names(NEIGHBOR_IDX, UPDATE_FIELDS)
 
@@ -158,8 +163,9 @@ def _run_steps(carry, n_steps: int, checkpoint_every: int | None, step_fn):
     the memory and, being memory-bound on the CPU, twice the time.  Without
     ``checkpoint_every`` the input carry of every step is kept (memory grows with the
     number of steps); with it, only the first carry of each chunk is kept, and a chunk is
-    replayed once more (memory flat, one more forward pass).  Outside differentiation
-    ``jax.checkpoint`` costs nothing.
+    replayed once more (one more forward pass); past :data:`MAX_STORED_CHUNKS` chunks,
+    groups of chunks are checkpointed too (:func:`_nested_scan`: memory flat, a second
+    extra forward pass).  Outside differentiation ``jax.checkpoint`` costs nothing.
     """
 
     def body(c, _):
@@ -178,10 +184,53 @@ def _run_steps(carry, n_steps: int, checkpoint_every: int | None, step_fn):
     def chunk(c, _):
         return jax.lax.scan(body, c, None, length=chunk_len)[0], None
 
-    carry = jax.lax.scan(chunk, carry, None, length=n_chunks)[0]
+    carry = _nested_scan(chunk, carry, n_chunks)[0]
     if rest:
         carry = jax.lax.scan(body, carry, None, length=rest)[0]
     return carry
+
+
+def _nested_scan(f, carry, length: int, stored: int = 1):
+    """``jax.lax.scan(f, carry, None, length=length)`` for an ``f`` whose reverse mode
+    stores ``stored`` carries (a checkpointed chunk: its input carry), with nested
+    checkpointing when the scan would store more than :data:`MAX_STORED_CHUNKS`.
+
+    Then the iterations are grouped: a scan over groups of about ``sqrt(length *
+    stored) / stored`` iterations (at most the bound's worth of groups, and one more for
+    the rest), each group checkpointed, so reverse mode stores one carry per group plus
+    those of the one group it replays: about ``2 sqrt(length * stored)`` carries rather
+    than ``length * stored`` (13 rather than 40 for 2,000 steps in chunks of 50), for one
+    more forward replay of each step.  A group that would still store too many is nested
+    again, so each level stores at most about the bound's worth.  Returns ``(carry,
+    ys)``, ``ys`` stacked over all ``length`` iterations as ``lax.scan`` stacks them.
+    """
+    if length * stored <= MAX_STORED_CHUNKS:
+        return jax.lax.scan(f, carry, None, length=length)
+    size = max(
+        math.ceil(math.sqrt(length * stored) / stored), math.ceil(length / MAX_STORED_CHUNKS)
+    )
+    n_groups, rest = divmod(length, size)
+
+    def group(c, _, n=size):
+        return _nested_scan(f, c, n, stored)
+
+    carry, ys = jax.lax.scan(jax.checkpoint(group, prevent_cse=False), carry, None, n_groups)
+    ys = jax.tree_util.tree_map(lambda y: y.reshape(-1, *y.shape[2:]), ys)
+    if rest:
+        carry, more = jax.checkpoint(functools.partial(group, n=rest), prevent_cse=False)(
+            carry, None
+        )
+        ys = jax.tree_util.tree_map(lambda y, z: jnp.concatenate([y, z]), ys, more)
+    return carry, ys
+
+
+def _stored_per_run(n_steps: int, checkpoint_every: int) -> int:
+    """How many carries reverse mode stores for :func:`_run_steps` with
+    ``checkpoint_every`` (the chunks' first carries, nested past the bound, and one per
+    step left over)."""
+    chunk_len = min(checkpoint_every, n_steps)
+    n_chunks, rest = divmod(n_steps, chunk_len)
+    return min(n_chunks, MAX_STORED_CHUNKS) + rest
 
 
 def _run_frames(carry, dt, params, *, model, save_every, n_frames, checkpoint_every, fixed=None):
@@ -194,9 +243,13 @@ def _run_frames(carry, dt, params, *, model, save_every, n_frames, checkpoint_ev
         carry = _run_steps(carry, save_every, checkpoint_every, step_fn)
         return carry, carry[0]
 
-    # No checkpoint around a frame: its chunks already store only their first carry, and
-    # one more level would replay the whole frame once more in reverse mode.
-    return jax.lax.scan(frame, carry, None, length=n_frames)
+    if checkpoint_every is None:
+        return jax.lax.scan(frame, carry, None, length=n_frames)
+    # Frames are checkpointed (in groups) only when their chunks together would store
+    # more than the bound: a frame's chunks already store only their first carry, and
+    # one more level replays the frames once more in reverse mode.
+    stored = _stored_per_run(save_every, int(checkpoint_every))
+    return _nested_scan(frame, carry, n_frames, stored)
 
 
 _with_reference = jax.jit(with_reference, static_argnames="model")
@@ -324,7 +377,10 @@ def simulate(
         carry is stored, about ``N * (4 d + 6 + K)`` numbers); with ``checkpoint_every``
         the steps are also grouped in chunks of this many and only each chunk's first
         carry is stored, so memory does not grow with every step, for one more forward
-        pass.  ``None``: store every step's carry (faster, memory linear in ``n_steps``).
+        pass.  Past ``MAX_STORED_CHUNKS`` (16) chunks the chunks are checkpointed in
+        groups too (nested checkpointing), so the stored carries stay few (13 for 40
+        chunks) at any ``n_steps``, for a second extra forward pass.  ``None``: store
+        every step's carry (faster, memory linear in ``n_steps``).
       on_frames: ``f(states, times)`` called with each finished block of frames (concrete
         runs only); used to append to HDF5 as the run goes.
       progress: ``f(n)`` called with the number of steps just completed.
