@@ -283,11 +283,8 @@ def _failure_reason(state: State, model: Model, row: int) -> str:
             sides.append(f"below the lower bound {lo:.6g} on axis {axis}")
         if not periodic and x[axis] > hi:
             sides.append(f"above the upper bound {hi:.6g} on axis {axis}")
-    return (
-        f"left the domain {where}, "
-        + " and ".join(sides)
-        + (" (a particle that flows out of a case's geometry: lengthen it or enlarge its Domain)")
-    )
+    hint = "a particle that flows out of a case's geometry: lengthen it or enlarge its Domain"
+    return f"left the domain {where}, {' and '.join(sides)} ({hint})"
 
 
 def _raise_failure(failure, dt, order=None, state=None, model=None):
