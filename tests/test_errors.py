@@ -164,7 +164,12 @@ def test_particle_leaving_a_closed_domain_stops_the_run_and_keeps_frames(tmp_pat
     velocity = np.zeros_like(position)
     position[particle, 1] = case.model.domain.upper[1] - 2 * case.info["dx"]
     velocity[particle, 1] = 20.0  # leaves through the top in about ten steps
-    state = case.state.replace(position=jnp.asarray(position), velocity=jnp.asarray(velocity))
+    start = 0.25  # a resumed run: the error gives the simulated time, not the steps' own
+    state = case.state.replace(
+        position=jnp.asarray(position),
+        velocity=jnp.asarray(velocity),
+        time=jnp.asarray(start, case.state.time.dtype),
+    )
     path = tmp_path / "escape.h5"
     with pytest.raises(sphjax.SimulationError) as err:
         with TrajectoryWriter(path, case) as writer:
@@ -173,11 +178,16 @@ def test_particle_leaving_a_closed_domain_stops_the_run_and_keeps_frames(tmp_pat
     assert error.particle == particle
     assert 2 < error.step < 40
     assert f"step {error.step}" in str(error) and f"particle {particle}" in str(error)
+    # what happened and where: the side it left by, its position and velocity
+    top = case.model.domain.upper[1]
+    assert "left the domain at x = [" in str(error), str(error)
+    assert f"above the upper bound {top:.6g} on axis 1" in str(error)
+    assert "non-finite" not in str(error)
+    assert error.time == pytest.approx(start + error.step * case.dt, rel=1e-4)
     trajectory, meta = read_trajectory(path)
     assert len(trajectory) == 1 + (error.step - 1) // 2  # every frame before the failure
     assert not meta["complete"] and "SimulationError" in meta["error"]
     assert np.all(np.isfinite(np.asarray(trajectory.states.position)))
-    top = case.model.domain.upper[1]
     assert float(trajectory.states.position[-1, particle, 1]) <= top
 
 

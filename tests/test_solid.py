@@ -33,6 +33,7 @@ from sphjax.physics.solid.material import (
     green_lagrange_strain,
     lame_constants,
     pk1_stress,
+    plane_stress_equivalent,
     st_venant_kirchhoff_stress,
 )
 
@@ -87,6 +88,17 @@ def test_lame_constants_eq19():
     lam, mu = lame_constants(2.0e6, 0.3975)
     assert mu == pytest.approx(2.0e6 / (2 * 1.3975))
     assert lam == pytest.approx(2.0e6 * 0.3975 / (1.3975 * (1 - 0.795)))
+
+
+def test_plane_stress_equivalent_gives_the_plane_stress_lame_constants():
+    """Plane stress (sigma_zz = 0) of (E, nu): mu unchanged, lambda* = E nu / (1 - nu^2);
+    a uniaxial stress sigma_xx then strains x by sigma_xx / E and y by -nu sigma_xx / E."""
+    for E, nu in [(12.0e6, 0.4), (2.0e6, 0.3975), (1.0, 0.0), (7.8e6, 0.47)]:
+        lam, mu = lame_constants(*plane_stress_equivalent(E, nu))
+        assert mu == pytest.approx(E / (2 * (1 + nu)), rel=1e-12)
+        assert lam == pytest.approx(E * nu / (1 - nu**2), rel=1e-12, abs=1e-12)
+        compliance = np.linalg.inv([[lam + 2 * mu, lam], [lam, lam + 2 * mu]])
+        np.testing.assert_allclose(compliance[:, 0] * E, [1.0, -nu], rtol=1e-12, atol=1e-15)
 
 
 def test_svk_stress_patch_numbers():

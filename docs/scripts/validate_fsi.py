@@ -24,7 +24,8 @@ the plate top's displacement against the published curves
 (:func:`sphjax.observables.momentum_budget`); figure ``docs/figures/fsi_obstacle.png``,
 numbers ``docs/figures/fsi_obstacle.json``.  ``--case gate``: the elastic gate's free end
 against Antoci et al.'s experiment (``docs/data/antoci_2007_gate_tip_displacement.csv``);
-``docs/figures/fsi_gate.png`` and ``.json``.
+``docs/figures/fsi_gate.png`` and ``.json``; with ``--plane-stress`` also the gate of the
+same E and nu in plane stress.
 """
 
 from __future__ import annotations
@@ -240,22 +241,19 @@ def obstacle(n, t_end, frames):
     return row
 
 
-def gate(n, t_end, frames, substeps):
-    """The elastic gate's free end against Antoci et al.'s experiment."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    case = elastic_gate_dam_break(n=n, substeps=substeps)
+def gate_run(case, t_end, frames, exp):
+    """Run the gate ``case``; its tip series and peaks against the experiment ``exp``."""
     traj, cost = run_coupled(case, t_end, frames)
     t = np.asarray(traj.states.time)
     tip = np.asarray(observables.tip_displacement(traj, case))
-    exp = read_series(DATA / "antoci_2007_gate_tip_displacement.csv")
-    row = dict(case="elastic_gate_dam_break", n=n, dx=case.info["dx"], t_end=t_end, **cost)
+    row = dict(case="elastic_gate_dam_break", n=case.info["n"], dx=case.info["dx"], **cost)
+    row["t_end"] = t_end
     row["substeps"] = case.info["substeps"]
+    row["young_modulus"] = float(case.params.young_modulus)
+    row["poisson_ratio"] = float(case.params.poisson_ratio)
     row["finite"] = bool(np.all(np.isfinite(tip)))
-    fig, ax = plt.subplots(1, 2, figsize=(10, 4))
+    fluid = np.asarray(traj.states.kind[0]) == Kind.FLUID
+    row["front_x_end"] = float(np.asarray(traj.states.position)[-1, fluid, 0].max())
     for j, key in enumerate(("ux", "uy")):
         te, ue = exp[key]
         pk, pt = peak(t, tip[:, j])
@@ -267,17 +265,50 @@ def gate(n, t_end, frames, substeps):
             experiment_peak_time=pte,
             peak_error=(pk - pke) / pke,
             curve_error=curve_error(t, tip[:, j], te, ue),
+            at=[[tt, float(np.interp(tt, t, tip[:, j]))] for tt in (0.04, 0.08, 0.16, 0.25, 0.35)],
         )
-        ax[j].plot(te, 1e3 * ue, "ko", label="Antoci et al. 2007 (experiment)")
-        ax[j].plot(t, 1e3 * tip[:, j], "b", label=f"sphjax, n = {n}")
-        ax[j].set(xlabel="t (s)", ylabel=f"{key} (mm)", title=f"gate free end, {key}")
-        ax[j].legend(fontsize=8)
     row["series"] = dict(
         time=t[:: max(1, len(t) // 100)].tolist(),
         tip=tip[:: max(1, len(t) // 100)].tolist(),
     )
+    return row, t, tip
+
+
+STYLES = ("b", "r--")
+
+
+def gate(n, t_end, frames, substeps, plane_stress=False):
+    """The elastic gate's free end against Antoci et al.'s experiment; with
+    ``plane_stress`` also the gate of the same E and nu in plane stress
+    (:func:`sphjax.physics.solid.material.plane_stress_equivalent`)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from sphjax.physics.solid.material import plane_stress_equivalent
+
+    exp = read_series(DATA / "antoci_2007_gate_tip_displacement.csv")
+    case = elastic_gate_dam_break(n=n, substeps=substeps)
+    runs = {"plane strain": gate_run(case, t_end, frames, exp)}
+    if plane_stress:
+        E, nu = (float(case.params.young_modulus), float(case.params.poisson_ratio))
+        E, nu = plane_stress_equivalent(E, nu)
+        sheet = elastic_gate_dam_break(n=n, substeps=substeps, young_modulus=E, poisson_ratio=nu)
+        runs["plane stress"] = gate_run(sheet, t_end, frames, exp)
+    fig, ax = plt.subplots(1, 2, figsize=(10, 4))
+    for j, key in enumerate(("ux", "uy")):
+        te, ue = exp[key]
+        ax[j].plot(te, 1e3 * ue, "ko", label="Antoci et al. 2007 (experiment)")
+        for (label, (_, t, tip)), style in zip(runs.items(), STYLES[: len(runs)], strict=True):
+            ax[j].plot(t, 1e3 * tip[:, j], style, label=f"sphjax, n = {n}, {label}")
+        ax[j].set(xlabel="t (s)", ylabel=f"{key} (mm)", title=f"gate free end, {key}")
+        ax[j].legend(fontsize=8)
     fig.tight_layout()
     fig.savefig(FIGURES / "fsi_gate.png", dpi=110)
+    row = runs["plane strain"][0]
+    if plane_stress:
+        row["plane_stress"] = runs["plane stress"][0]
     return row
 
 
@@ -312,6 +343,11 @@ def main(argv=None):
         action="store_true",
         help="surface placement: leave the columns on x = 0 and x = L free",
     )
+    p.add_argument(
+        "--plane-stress",
+        action="store_true",
+        help="gate: also run the gate of the same E, nu in plane stress",
+    )
     p.add_argument("--out", default=None)
     args = p.parse_args(argv)
     if args.case in ("obstacle", "gate"):
@@ -320,7 +356,8 @@ def main(argv=None):
             row = obstacle(n, args.t_end or 1.0, args.frames)
         else:
             k = args.substeps[0]
-            row = gate(n, args.t_end or 0.4, args.frames, k if k == "auto" else int(k))
+            k = k if k == "auto" else int(k)
+            row = gate(n, args.t_end or 0.4, args.frames, k, args.plane_stress)
         out = pathlib.Path(args.out or FIGURES / f"fsi_{args.case}.json")
         out.write_text(json.dumps(row, indent=1) + "\n")
         print(json.dumps({k: v for k, v in row.items() if k != "series"}, indent=1))

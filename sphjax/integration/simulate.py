@@ -323,17 +323,44 @@ def _expand(state: State) -> State:
     return jax.tree_util.tree_map(lambda x: x[None], state)
 
 
-def _raise_failure(failure, dt, order=None):
-    step, particle = (int(x) for x in np.asarray(failure))
-    if order is not None:
-        particle = int(order[particle])
+def _failure_reason(state: State, model: Model, row: int) -> str:
+    """What :func:`unhealthy` found at particle ``row`` of the failing ``state``: a
+    non-finite value, or the side of the domain it left, with its position and velocity."""
+    x = np.asarray(state.position[row], np.float64)
+    v = np.asarray(state.velocity[row], np.float64)
+    where = f"at x = {np.round(x, 6).tolist()} with v = {np.round(v, 4).tolist()}"
+    if not (np.all(np.isfinite(x)) and np.all(np.isfinite(v))):
+        return f"has a non-finite position/velocity ({where})"
+    sides = []
+    for axis, (lo, hi, periodic) in enumerate(
+        zip(model.domain.lower, model.domain.upper, model.domain.periodic, strict=True)
+    ):
+        if not periodic and x[axis] < lo:
+            sides.append(f"below the lower bound {lo:.6g} on axis {axis}")
+        if not periodic and x[axis] > hi:
+            sides.append(f"above the upper bound {hi:.6g} on axis {axis}")
+    hint = "a particle that flows out of a case's geometry: lengthen it or enlarge its Domain"
+    return f"left the domain {where}, {' and '.join(sides)} ({hint})"
+
+
+def _raise_failure(failure, dt, order=None, state=None, model=None):
+    """Raise the SimulationError of a recorded ``failure = (step, particle)``; with the
+    failing ``state`` and ``model`` (concrete runs) it says what went wrong and where,
+    and its time is the state's own (right after a resumed run's start too)."""
+    step, row = (int(x) for x in np.asarray(failure))
+    particle = row if order is None else int(order[row])
     if step >= 0:
+        time = step * float(dt) if state is None else float(state.time)
+        if state is None:
+            reason = "has a non-finite position/velocity or left the domain"
+        else:
+            reason = _failure_reason(state, model, row)
         raise SimulationError(
-            f"simulation went unstable at step {step} (t = {step * float(dt):.6g}): particle "
-            f"{particle} has a non-finite position/velocity or left the domain",
+            f"simulation went unstable at step {step} (t = {time:.6g}): particle "
+            f"{particle} {reason}",
             step=step,
             particle=particle,
-            time=step * float(dt),
+            time=time,
         )
 
 
@@ -563,7 +590,7 @@ def _simulate_in_chunks(
                 kept = jax.tree_util.tree_map(operator.itemgetter(slice(good)), frames)
                 if on_frames is not None and good:
                     on_frames(kept, frame_times[:good])
-                _raise_failure(carry[2], dt, order)
+                _raise_failure(carry[2], dt, order, carry[0], model)
             if on_frames is not None:
                 on_frames(frames, frame_times)
             all_frames.append(frames)

@@ -7,6 +7,7 @@
 
 In 2D these (three-dimensional) Lamé constants give plane strain.  The material is
 frame-indifferent: a rigid rotation ``F = R`` gives ``E = 0`` and ``P = 0``.
+Plane stress in 2D is the same law with the (E', nu') of :func:`plane_stress_equivalent`.
 """
 
 from __future__ import annotations
@@ -22,6 +23,20 @@ def lame_constants(young_modulus, poisson_ratio):
     mu = young_modulus / (2.0 * (1.0 + poisson_ratio))
     lam = young_modulus * poisson_ratio / ((1.0 + poisson_ratio) * (1.0 - 2.0 * poisson_ratio))
     return lam, mu
+
+
+def plane_stress_equivalent(young_modulus, poisson_ratio):
+    """``(E', nu')`` whose plane-strain Lamé constants (eq. 19) are the plane-stress ones of
+    ``(E, nu)``: ``mu`` unchanged and ``lambda* = E nu / (1 - nu^2)``, so that a 2D solid
+    given ``E'`` and ``nu'`` is a thin sheet of ``(E, nu)`` free to contract through its
+    thickness:
+
+        E' = E (1 + 2 nu) / (1 + nu)^2,        nu' = nu / (1 + nu)
+
+    A plate in 2D bends with ``E / (1 - nu^2)`` in plane strain and ``E`` in plane stress.
+    """
+    scaled = young_modulus * (1.0 + 2.0 * poisson_ratio) / (1.0 + poisson_ratio) ** 2
+    return scaled, poisson_ratio / (1.0 + poisson_ratio)
 
 
 def green_lagrange_strain(F: jax.Array) -> jax.Array:
