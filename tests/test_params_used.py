@@ -23,6 +23,14 @@ FLUID_ONLY_VISCOUS = ("artificial_alpha", "artificial_beta", "density_diffusion"
 MORRIS_WALLS = ("artificial_alpha", "artificial_beta", "transport_pressure", "density_diffusion")
 MONAGHAN_WALLS = ("kinematic_viscosity", "transport_pressure")
 FSI = ("kinematic_viscosity", "transport_pressure", "penalty_alpha")
+# a rigid body in water: no elastic fields (it does not deform)
+RIGID = (
+    "kinematic_viscosity",
+    "transport_pressure",
+    "young_modulus",
+    "poisson_ratio",
+    "penalty_alpha",
+)
 
 # case -> (smallest resolution that builds, the fields its model does not read)
 UNUSED = {
@@ -43,6 +51,7 @@ UNUSED = {
     "hydrostatic_fsi_plate_3d": (2, FSI),
     "elastic_gate_dam_break": (2, FSI),
     "dam_break_elastic_obstacle": (2, FSI),
+    "floating_body": (4, RIGID),
 }
 
 # the gradient check evaluates the right-hand side; these are the largest at their

@@ -10,7 +10,9 @@ import pytest
 
 import sphjax
 from sphjax.cases import body_bottom, floating_body
+from sphjax.cli import main
 from sphjax.integration.stepper import stepper_for
+from sphjax.io import read_trajectory
 from sphjax.physics.rhs import build_neighbors, with_reference
 from sphjax.physics.rigid.system import rigid_acceleration, rigid_motion
 
@@ -87,3 +89,20 @@ def test_the_gradient_of_the_bodys_height_wrt_its_density_matches_finite_differe
     fd = (float(height(rho_b + step)) - float(height(rho_b - step))) / (2 * step)
     assert grad < 0  # a denser body sinks faster
     assert grad == pytest.approx(fd, rel=1e-5)
+
+
+def test_floating_body_runs_from_the_command_line(tmp_path):
+    """``sphjax run floating_body`` (a case of ``sphjax.cases.CASES``): a short run at the
+    coarsest resolution, the body's particles kept together as one body."""
+    out = tmp_path / "body.h5"
+    argv = ["run", "floating_body", "--n", "4", "--t-end", "0.005", "--quiet", "--out", str(out)]
+    assert main(argv) == 0
+    trajectory, meta = read_trajectory(out)
+    assert meta["complete"] and meta["case"] == "floating_body" and meta["case_info"]["n"] == 4
+    case = floating_body(n=4)
+    body = np.asarray(case.info["body_indices"])
+    x = np.asarray(trajectory.states.position)[:, body]
+    moved = x - x[:1]
+    assert np.all(np.isfinite(x)) and np.max(np.abs(moved)) > 0
+    # a rigid motion: every particle moved as the body did (no rotation: a level body)
+    np.testing.assert_allclose(moved, np.broadcast_to(moved[:, :1], moved.shape), atol=1e-6)

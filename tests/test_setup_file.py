@@ -197,6 +197,81 @@ def test_toml_fsi_plate_is_the_built_in_one(tmp_path, n):
         assert np.array_equal(a, np.asarray(getattr(theirs.state_for(params), field))), field
 
 
+def _floating_body_toml(case) -> str:
+    """The built-in floating body ``case`` as a set-up file (its numbers as it computed
+    them): water around a rigid body in an open tank, the body cut out of the water."""
+    i = case.info
+    dx, W, D = i["dx"], i["tank_width"], i["water_depth"]
+    x0 = float(np.min(np.asarray(case.state.position)[list(i["body_indices"]), 0])) - dx / 2
+    y0, w, hb = i["initial_bottom"], i["body_width"], i["body_height"]
+    tank_height = max(1.5 * D, y0 + 2 * hb)
+    lower, upper = case.model.domain.lower, case.model.domain.upper
+    return f"""
+name = "floating_body_toml"
+dim = 2
+dx = {dx!r}
+gravity = [0.0, -9.81]
+[time]
+t_end = 2.0
+[domain]
+lower = [{lower[0]!r}, {lower[1]!r}]
+upper = [{upper[0]!r}, {upper[1]!r}]
+[fluid]
+density = 1000.0
+sound_speed = {float(case.params.sound_speed)!r}
+artificial_viscosity = 0.1
+density_diffusion = 0.1
+hydrostatic = true
+[[fluid.shapes]]
+shape = "rectangle"
+lower = [0.0, 0.0]
+upper = [{W!r}, {D!r}]
+[walls]
+[[walls.shapes]]
+shape = "rectangle"
+lower = [0.0, 0.0]
+upper = [{W!r}, {tank_height!r}]
+open_top = true
+[rigid]
+density = {float(case.params.solid_density)!r}
+[[rigid.shapes]]
+shape = "rectangle"
+lower = [{x0!r}, {y0!r}]
+upper = [{x0 + w!r}, {y0 + hb!r}]
+"""
+
+
+def test_toml_floating_body_is_the_built_in_one(tmp_path):
+    """A fluid, walls and a ``[rigid]`` body make the built-in floating body particle for
+    particle, with the same model (the body a no-slip moving boundary), parameters and
+    step; the initial state follows the body's density as the built-in one's does."""
+    theirs = sphjax.cases.floating_body(n=4)
+    ours = from_toml(_write(tmp_path, "body.toml", _floating_body_toml(theirs)))
+    for field in ("position", "velocity", "density", "mass", "kind", "volume"):
+        a, b = np.asarray(getattr(ours.state, field)), np.asarray(getattr(theirs.state, field))
+        assert a.shape == b.shape and np.array_equal(a, b), field
+    assert ours.model == theirs.model
+    assert ours.info["n_rigid"] == len(theirs.info["body_indices"])
+    for (name, a), (_, b) in zip(ours.params.items(), theirs.params.items(), strict=True):
+        assert np.array_equal(np.asarray(a), np.asarray(b)), name
+    assert ours.params.unused == theirs.params.unused
+    assert ours.dt == theirs.dt
+    params = theirs.params.replace(solid_density=700.0)
+    for field in ("density", "mass"):
+        a = np.asarray(getattr(ours.state_for(params), field))
+        assert np.array_equal(a, np.asarray(getattr(theirs.state_for(params), field))), field
+
+
+def test_example_floating_body_is_the_default_floating_body():
+    example, default = from_toml(EXAMPLES / "floating_body.toml"), sphjax.cases.floating_body()
+    a, b = np.asarray(example.state.position), np.asarray(default.state.position)
+    assert a.shape == b.shape
+    np.testing.assert_allclose(a, b, rtol=0, atol=1e-12)
+    assert np.array_equal(np.asarray(example.state.kind), np.asarray(default.state.kind))
+    assert example.model.systems == default.model.systems
+    assert float(example.params.solid_density) == float(default.params.solid_density)
+
+
 def test_example_fsi_plate_sags_under_the_column():
     """examples/fsi_plate.toml (0.5 m plate, 0.02 m thick, under 0.3 m of water) at dx =
     0.01: split integration by default, with as many plate steps a step as the plate's
@@ -366,10 +441,22 @@ lower = [0.0, 0.0]
 upper = [0.2, 0.02]
 """
 
+RIGID = """
+[rigid]
+density = 500.0
+[[rigid.shapes]]
+shape = "rectangle"
+lower = [0.1, 0.2]
+upper = [0.2, 0.3]
+"""
+
 
 def test_the_base_files_are_valid(tmp_path):
     assert from_toml(_write(tmp_path, "a.toml", BASE)).info["n_fluid"] == 36
     assert from_toml(_write(tmp_path, "b.toml", SOLID)).info["n_solid"] == 40
+    body = from_toml(_write(tmp_path, "c.toml", BASE + RIGID))
+    assert body.info["n_rigid"] == 4 and body.info["n_fluid"] == 36 - 4  # cut out
+    assert isinstance(body.model.systems[-1], sphjax.RigidSystem)
 
 
 def _edit(old, new, base=BASE):
@@ -500,12 +587,38 @@ BAD_FILES = [
         BASE + _edit("0.3\n", '0.3\nslip = "slippy"\n', SOLID.split("t_end = 0.1\n")[1]),
         "solid.slip: unknown value 'slippy'; did you mean 'no_slip'?",
     ),
+    (
+        BASE + _edit("density = 500.0", 'density = 500.0\nslip = "sticky"', RIGID),
+        "rigid.slip: unknown value 'sticky'; choose one of no_slip, free_slip",
+    ),
+    (BASE + _edit("density = 500.0", "", RIGID), "rigid.density: missing; add it"),
+    (
+        BASE + _edit("[0.1, 0.2]", "[0.1, -0.1]", RIGID),
+        "rigid.shapes: 4 of their particles lie in the walls (e.g. at 0.125, -0.075)",
+    ),
+    (
+        SOLID + RIGID,
+        "rigid: a file has a [solid] or a [rigid] section, not both (both are set by "
+        "Params.solid_density); remove one of them",
+    ),
+    (
+        SOLID.split("[solid]")[0]
+        + _edit("density = 500.0", 'density = 500.0\nslip = "no_slip"', RIGID),
+        "rigid.slip: concerns a body in a fluid only; remove it or add a [fluid] section",
+    ),
+    (
+        _edit("dim = 2", "dim = 3", SOLID.split("[solid]")[0]) + RIGID,
+        "rigid: rigid bodies are 2D (RigidSystem) but dim = 3; use dim = 2",
+    ),
     (_edit("[fluid]", "[fluids]"), "fluids: unknown key; did you mean 'fluid'?"),
     (
         BASE.split("[fluid]")[0] + "[walls]\n" + BASE.split("[walls]")[1],
         "walls: walls act on a fluid only",
     ),
-    (BASE.split("[fluid]")[0], "the file describes no body; add a [fluid] or a [solid] section"),
+    (
+        BASE.split("[fluid]")[0],
+        "the file describes no body; add a [fluid], a [solid] or a [rigid] section",
+    ),
     (
         _edit("poisson_ratio = 0.3", "poisson_ratio = 0.7", SOLID),
         "solid.poisson_ratio: must lie in (-1, 0.5), got 0.7",

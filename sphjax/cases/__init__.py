@@ -76,6 +76,7 @@ CASES = {
     "hydrostatic_fsi_plate_3d": hydrostatic_fsi_plate_3d,
     "elastic_gate_dam_break": elastic_gate_dam_break,
     "dam_break_elastic_obstacle": dam_break_elastic_obstacle,
+    "floating_body": floating_body,
 }
 
 

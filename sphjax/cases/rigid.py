@@ -69,10 +69,10 @@ def floating_body(
     nx_body = max(1, round(w / dx))
     w = nx_body * dx
     W = dx * round(W / dx)
-    D = dx * round(D / dx)
-    d0 = dx * max(1, round(initial_draught * hb / dx))
+    rows, rows_under = round(D / dx), max(1, round(initial_draught * hb / dx))
+    D, d0 = dx * rows, dx * rows_under
     x0 = dx * round((W - w) / (2 * dx))  # the body's left face, on the lattice
-    y0 = D - d0  # its bottom
+    y0 = dx * (rows - rows_under)  # its bottom, on the lattice
     water = lattice([0.0, 0.0], [W, D], dx)
     inside = (
         (water[:, 0] > x0) & (water[:, 0] < x0 + w) & (water[:, 1] > y0) & (water[:, 1] < y0 + hb)

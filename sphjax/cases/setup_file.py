@@ -11,11 +11,12 @@ overlap, all raise :class:`SetupError` whose message starts with the key, e.g.
 ``fluid.shapes[0].radius: must be a positive number, got -1``.
 
 Particles are the lattice sites of :mod:`sphjax.geometry` (one lattice of spacing ``dx`` for
-every body), in the blocks the systems own: fluid, walls, then solid and clamped particles.
+every body), in the blocks the systems own: fluid, walls, then solid and clamped particles,
+then a rigid body's.
 Fluid particles have mass ``rho0 dx^d``; with ``hydrostatic = true`` their initial density is
 that of the pressure ``rho0 |g| depth`` (the equation of state inverted), the depth measured
 against gravity from the top of each particle's own shape.  Solid particles have volume
-``dx^d`` and mass ``rho dx^d``.  The initial state follows the Params
+``dx^d`` and mass ``rho dx^d``, a rigid body's too.  The initial state follows the Params
 (``case.state_for(params)``), as the built-in cases' do.
 """
 
@@ -49,6 +50,7 @@ from sphjax.physics.fluid.density_diffusion import MolteniColagrossi
 from sphjax.physics.fluid.eos import LinearEOS, TaitEOS
 from sphjax.physics.fluid.system import FluidSystem
 from sphjax.physics.fluid.viscosity import ArtificialViscosity, MorrisViscosity
+from sphjax.physics.rigid.system import RigidSystem
 from sphjax.physics.solid.boundary import SolidBoundary
 from sphjax.physics.solid.penalty import PenaltyForce
 from sphjax.physics.solid.system import SolidSystem
@@ -77,7 +79,7 @@ SHAPE_DIM = dict(rectangle=2, circle=2, polygon=2, box=3, sphere=3, cylinder=3, 
 WALL_SIDES = ("outside", "inside", "fill")
 TOP_KEYS = (
     "name", "dim", "dx", "kernel", "h_factor", "gravity", "lattice_origin",
-    "time", "fluid", "walls", "solid", "domain",
+    "time", "fluid", "walls", "solid", "rigid", "domain",
 )  # fmt: skip
 
 
@@ -299,17 +301,26 @@ def read_setup(path) -> dict:
     if s["save_every"] is not None and s["save_dt"] is not None:
         raise SetupError("time.save_dt", "give either time.save_every or time.save_dt, not both")
 
-    for name in ("fluid", "walls", "solid", "domain"):
+    for name in ("fluid", "walls", "solid", "rigid", "domain"):
         top.known.append(name)
     s["fluid"] = _fluid(raw["fluid"], dim, folder) if "fluid" in raw else None
     s["walls"] = _walls(raw["walls"], dim, folder) if "walls" in raw else None
     s["solid"] = _solid(raw["solid"], dim, folder, "fluid" in raw) if "solid" in raw else None
+    s["rigid"] = _rigid(raw["rigid"], dim, folder, "fluid" in raw) if "rigid" in raw else None
     s["domain"] = _domain(raw["domain"], dim) if "domain" in raw else None
     top.done()
     if s["walls"] is not None and s["fluid"] is None:
         raise SetupError("walls", "walls act on a fluid only; add a [fluid] section or remove it")
-    if s["fluid"] is None and s["solid"] is None:
-        raise SetupError(None, "the file describes no body; add a [fluid] or a [solid] section")
+    if s["fluid"] is None and s["solid"] is None and s["rigid"] is None:
+        raise SetupError(
+            None, "the file describes no body; add a [fluid], a [solid] or a [rigid] section"
+        )
+    if s["solid"] is not None and s["rigid"] is not None:
+        raise SetupError(
+            "rigid",
+            "a file has a [solid] or a [rigid] section, not both (both are set by "
+            "Params.solid_density); remove one of them",
+        )
     return s
 
 
@@ -403,6 +414,27 @@ def _solid(table, dim, folder, coupled: bool) -> dict:
     s["clamps"] = _shapes(t, "clamps", dim, folder, required=False)
     t.done()
     return s
+
+
+def _rigid(table, dim, folder, coupled: bool) -> dict:
+    """``[rigid]``: one rigid body (2D), its shapes joined; ``coupled``: the file has a
+    fluid too, which the body's ``slip`` concerns."""
+    t = _Table(table, "rigid")
+    if dim != 2:
+        raise SetupError("rigid", f"rigid bodies are 2D (RigidSystem) but dim = {dim}; use dim = 2")
+    r = dict(
+        density=t.get("density", "number", positive=True, hint=" (the density in kg/m^3)"),
+        velocity=t.get("velocity", "vector", (0.0,) * dim, length=dim),
+        slip=t.get("slip", "string", None, choices=("no_slip", "free_slip")),
+    )
+    if r["slip"] is not None and not coupled:
+        raise SetupError(
+            "rigid.slip", "concerns a body in a fluid only; remove it or add a [fluid] section"
+        )
+    r["slip"] = r["slip"] or "no_slip"
+    r["shapes"] = _shapes(t, "shapes", dim, folder)
+    t.done()
+    return r
 
 
 def _substeps(t: _Table):
@@ -537,9 +569,11 @@ def build_setup(s: dict) -> Case:
             if opts["side"] != "outside":
                 obstacles.append(shape)
             wall_blocks.append((x, opts["side"]))
-    solid = s["solid"]
+    solid, rigid = s["solid"], s["rigid"]
     if solid is not None:  # a solid in a fluid displaces it
         obstacles += [shape for shape, _ in solid["shapes"] + solid["clamps"]]
+    if rigid is not None:  # so does a rigid body
+        obstacles += [shape for shape, _ in rigid["shapes"]]
     x_wall, wall_tag = _unique_sites(wall_blocks, dx, origin)
     x_fluid, fluid_tag = _unique_sites(fluid_blocks, dx, origin)
     if len(x_fluid):
@@ -589,14 +623,33 @@ def build_setup(s: dict) -> Case:
                 "solid.shapes",
                 f"hold no free particle at dx = {dx:g}; use a smaller dx or smaller clamps",
             )
+    # a rigid body's sites: its shapes joined into one body
+    x_rigid = np.zeros((0, dim))
+    if rigid is not None:
+        body = [
+            (sample(shape, f"rigid.shapes[{i}]"), None)
+            for i, (shape, _) in enumerate(rigid["shapes"])
+        ]
+        x_rigid, _ = _unique_sites(body, dx, origin)
+        in_walls = _members(_keys(x_rigid, dx, origin), _keys(x_wall, dx, origin))
+        if np.any(in_walls):
+            raise SetupError(
+                "rigid.shapes",
+                f"{int(in_walls.sum())} of their particles lie in the walls (e.g. at "
+                f"{', '.join(f'{v:.4g}' for v in x_rigid[np.argmax(in_walls)])}); a body "
+                "and the walls may touch but not overlap: move or shorten one of them",
+            )
+        if len(x_rigid) == 0:
+            raise SetupError("rigid.shapes", f"hold no particle at dx = {dx:g}; use a smaller dx")
 
-    x = np.concatenate([x_fluid, x_wall, x_solid, x_clamped])
+    x = np.concatenate([x_fluid, x_wall, x_solid, x_clamped, x_rigid])
     kind = np.concatenate(
         [
             np.full(len(x_fluid), Kind.FLUID),
             np.full(len(x_wall), Kind.WALL),
             np.full(len(x_solid), Kind.SOLID),
             np.full(len(x_clamped), Kind.CLAMPED),
+            np.full(len(x_rigid), Kind.RIGID),
         ]
     ).astype(np.int32)
     velocity = np.zeros_like(x)
@@ -609,6 +662,8 @@ def build_setup(s: dict) -> Case:
             depth[: len(x_fluid)] = tops - x_fluid @ up
     if solid is not None:
         velocity[kind == Kind.SOLID] = solid["velocity"]
+    if rigid is not None:
+        velocity[kind == Kind.RIGID] = rigid["velocity"]
 
     # model and parameters
     systems, values = [], {}
@@ -657,6 +712,9 @@ def build_setup(s: dict) -> Case:
             solid_density=solid["density"],
             penalty_alpha=solid["penalty_alpha"] or 0.0,
         )
+    if rigid is not None:
+        systems.append(RigidSystem(SolidBoundary(no_slip=rigid["slip"] == "no_slip")))
+        values.update(solid_density=rigid["density"])
     params = make_params(dim, gravity=tuple(gravity), **values)
     domain = _model_domain(s, x, dx, gravity)
     model = Model(dim=dim, smoothing_length=h, kernel=kernel, domain=domain, systems=tuple(systems))
@@ -664,10 +722,11 @@ def build_setup(s: dict) -> Case:
     fluid_like = jnp.asarray(kind <= Kind.WALL)
     depth_j = jnp.asarray(depth)
     eos = systems[0].equation_of_state if fluid is not None else None
+    bodies = solid is not None or rigid is not None
 
     def initial_state(p):
         """Densities (hydrostatic through the inverse equation of state) and masses from
-        ``p``; the solid's from ``p.solid_density``."""
+        ``p``; the solid's or the rigid body's from ``p.solid_density``."""
         density = jnp.zeros(len(x))
         mass = jnp.zeros(len(x))
         if fluid is not None:
@@ -676,13 +735,11 @@ def build_setup(s: dict) -> Case:
             rho = eos.density(pressure, p.fluid)
             density = jnp.where(fluid_like, rho, density)
             mass = jnp.where(fluid_like, rho0 * volume, mass)
-        if solid is not None:
+        if bodies:
             density = jnp.where(fluid_like, density, p.solid_density)
             mass = jnp.where(fluid_like, mass, p.solid_density * volume)
-        # fluid and wall particles: V0 = m / rho (make_state's default), solids: dx^d
-        return make_state(
-            x, velocity, density, mass, kind, volume=None if solid is None else volume
-        )
+        # fluid and wall particles: V0 = m / rho (make_state's default), bodies: dx^d
+        return make_state(x, velocity, density, mass, kind, volume=volume if bodies else None)
 
     state = initial_state(params)
     cfl = s["cfl"]
@@ -708,6 +765,7 @@ def build_setup(s: dict) -> Case:
         n_wall=len(x_wall),
         n_solid=len(x_solid),
         n_clamped=len(x_clamped),
+        n_rigid=len(x_rigid),
         substeps=substeps,
         dt_given=s["dt"] is not None,
         save_every=s["save_every"],
@@ -745,7 +803,7 @@ def _model_domain(s, x, dx, gravity) -> Domain:
         return Domain(tuple(d["lower"]), tuple(d["upper"]), tuple(d["periodic"]))
     lower = x.min(axis=0) - 0.5 * dx - 2 * dx
     upper = x.max(axis=0) + 0.5 * dx + 2 * dx
-    if s["fluid"] is None:  # a solid bends and swings: room of its own size on every side
+    if s["fluid"] is None:  # a body bends, swings or falls: room of its own size all round
         reach = float(np.max(upper - lower))
         lower, upper = lower - reach, upper + reach
     elif np.any(gravity):
