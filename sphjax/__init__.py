@@ -65,6 +65,7 @@ _NAMES = {
     "SolidSystem": "sphjax.physics.solid.system",
     "SolidBoundary": "sphjax.physics.solid.boundary",
     "RigidSystem": "sphjax.physics.rigid.system",
+    "WallContact": "sphjax.physics.rigid.contact",
 }
 _MODULES = {"kernels": "sphjax.core.kernels"}
 
@@ -139,5 +140,6 @@ __all__ = [
     "TrajectoryWriter",
     "TransportVelocity",
     "UnusedParameterError",
+    "WallContact",
     "WallSystem",
 ]

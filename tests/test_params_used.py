@@ -52,6 +52,7 @@ UNUSED = {
     "elastic_gate_dam_break": (2, FSI),
     "dam_break_elastic_obstacle": (2, FSI),
     "floating_body": (4, RIGID),
+    "sinking_body": (4, RIGID),
 }
 
 # the gradient check evaluates the right-hand side; these are the largest at their

@@ -1,5 +1,7 @@
 """Rigid bodies (sphjax.physics.rigid): the rigid motion's accelerations, the fluid's
-force on a body against Archimedes, and the gradient through a floating body's motion."""
+force on a body against Archimedes, the gradient through a floating body's motion, and
+wall contact: the spring-dashpot force against its formula, and a body denser than water
+that sinks and comes to rest on the floor."""
 
 from __future__ import annotations
 
@@ -9,7 +11,7 @@ import numpy as np
 import pytest
 
 import sphjax
-from sphjax.cases import body_bottom, floating_body
+from sphjax.cases import body_bottom, floating_body, sinking_body
 from sphjax.cli import main
 from sphjax.integration.stepper import stepper_for
 from sphjax.io import read_trajectory
@@ -106,3 +108,89 @@ def test_floating_body_runs_from_the_command_line(tmp_path):
     assert np.all(np.isfinite(x)) and np.max(np.abs(moved)) > 0
     # a rigid motion: every particle moved as the body did (no rotation: a level body)
     np.testing.assert_allclose(moved, np.broadcast_to(moved[:, :1], moved.shape), atol=1e-6)
+
+
+def _lowered(case, gap_rows):
+    """``case``'s state with its body moved down so that its bottom row of particles lies
+    ``gap_rows`` spacings above the floor's top row of wall particles."""
+    dx, idx = case.info["dx"], np.asarray(case.info["body_indices"])
+    x = np.asarray(case.state.position).copy()
+    x[idx, 1] += (gap_rows * dx - 0.5 * dx) - x[idx, 1].min()
+    return case.state.replace(position=jnp.asarray(x)), idx
+
+
+def _body_acceleration(case, state):
+    neighbors = sphjax.build_neighbors(state, case.model)
+    out = sphjax.evaluate(state, neighbors, case.model, case.params)
+    return np.asarray(out.acceleration)
+
+
+def test_wall_contact_is_the_spring_and_dashpot_force_summed_over_the_body():
+    """A level body whose bottom row lies 1.2 spacings above the floor's wall particles
+    (inside the contact distance 1.5 dx of the wall particle under each, beyond that of
+    the diagonal ones): each bottom particle gets ``omega^2 (1.5 - 1.2) dx`` upward, the
+    body (``rows`` particles per column) ``omega^2 0.3 dx / rows``; sliding at ``u``, the
+    tangential dashpot adds ``-min(2 zeta omega u, mu F_n) / rows`` per unit mass."""
+    case = sinking_body(n=4)
+    contact = case.model.systems[-1].wall_contact
+    free = case.model.replace(
+        systems=(*case.model.systems[:-1], case.model.systems[-1].replace(wall_contact=None))
+    )
+    state, idx = _lowered(case, 1.2)
+    rows, dx, omega = 4, case.info["dx"], contact.frequency
+    with_contact = _body_acceleration(case, state)[idx]
+    without = _body_acceleration(case.replace(model=free), state)[idx]
+    push = with_contact - without
+    np.testing.assert_allclose(push[:, 1], omega**2 * 0.3 * dx / rows, rtol=1e-9)
+    np.testing.assert_allclose(push[:, 0], 0.0, atol=1e-9 * omega**2 * dx)
+    # sliding: the dashpot's tangential force, below the Coulomb cap
+    u = 1e-3
+    sliding = state.replace(velocity=state.velocity.at[idx, 0].set(u))
+    drag = (
+        _body_acceleration(case, sliding)[idx]
+        - _body_acceleration(case.replace(model=free), sliding)[idx]
+    )
+    assert 2 * contact.damping_ratio * omega * u < contact.friction * omega**2 * 0.3 * dx
+    # the centre of mass's acceleration (equal masses: the mean; the friction on the
+    # bottom row also tips the body, so the particles' accelerations differ)
+    centre = float(np.mean(drag[:, 0]))
+    assert centre == pytest.approx(-2 * contact.damping_ratio * omega * u / rows, rel=1e-9)
+    # beyond the contact distance: nothing
+    far, _ = _lowered(case, 1.6)
+    np.testing.assert_array_equal(
+        _body_acceleration(case, far)[idx], _body_acceleration(case.replace(model=free), far)[idx]
+    )
+
+
+def test_a_body_denser_than_water_sinks_and_comes_to_rest_on_the_floor():
+    """A body 1.5 times as dense as water, released with its bottom one spacing above the
+    floor (n = 4): it sinks, lands and stays on the floor, its bottom face within half a
+    spacing above it (the contact distance) and never below it, at rest."""
+    case = sinking_body(n=4, release_height=0.025, t_end=0.8)
+    dx = case.info["dx"]
+    trajectory = sphjax.simulate(case, save_every=round(0.01 / case.dt))
+    idx = np.asarray(case.info["body_indices"])
+    bottom = np.asarray(body_bottom(trajectory.states, case))
+    lowest = np.asarray(trajectory.states.position)[:, idx, 1].min(axis=1) - 0.5 * dx
+    speed = np.linalg.norm(np.asarray(trajectory.states.velocity)[:, idx].mean(axis=1), axis=-1)
+    t = np.asarray(trajectory.times)
+    assert bottom[0] == pytest.approx(dx)
+    assert 0.0 < bottom[-1] < 0.5 * dx  # on the floor, within the contact distance
+    assert lowest.min() > 0.0  # no particle of the body ever below the floor
+    assert np.max(speed[t > 0.6]) < 1e-3  # at rest (it landed at about 0.1 m/s)
+    assert np.max(np.abs(bottom[t > 0.6] - bottom[-1])) < 0.01 * dx
+
+
+def test_bodies_that_sink_or_float_are_refused_by_the_other_case():
+    with pytest.raises(ValueError, match=r"^density_ratio must exceed 1 .*floating_body$"):
+        sinking_body(density_ratio=0.5)
+    with pytest.raises(ValueError, match=r"^density_ratio must be below 1 .*sinking_body$"):
+        floating_body(density_ratio=1.5)
+    with pytest.raises(ValueError, match=r"^release_height \+ body_height = 0.5 must lie below"):
+        sinking_body(release_height=0.4)
+    with pytest.raises(ValueError, match=r"^WallContact.frequency must be a number > 0, got -1"):
+        sphjax.WallContact(frequency=-1)
+    with pytest.raises(ValueError, match=r"^WallContact.distance must be a number > 1, got 0.5"):
+        sphjax.WallContact(frequency=100.0, distance=0.5)
+    with pytest.raises(ValueError, match=r"^RigidSystem.wall_contact must be WallContact"):
+        sphjax.RigidSystem(wall_contact=100.0)

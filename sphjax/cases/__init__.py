@@ -38,7 +38,7 @@ from sphjax.cases.fsi import (
     midspan_deflection,
     plate_deflection_reference,
 )
-from sphjax.cases.rigid import body_bottom, floating_body
+from sphjax.cases.rigid import body_bottom, floating_body, sinking_body
 from sphjax.cases.setup_file import SetupError, from_toml
 from sphjax.cases.solid import (
     oscillating_plate,
@@ -77,6 +77,7 @@ CASES = {
     "elastic_gate_dam_break": elastic_gate_dam_break,
     "dam_break_elastic_obstacle": dam_break_elastic_obstacle,
     "floating_body": floating_body,
+    "sinking_body": sinking_body,
 }
 
 
@@ -149,5 +150,6 @@ __all__ = [
     "midspan_deflection",
     "plate_deflection_reference",
     "floating_body",
+    "sinking_body",
     "body_bottom",
 ]

@@ -7,7 +7,13 @@ import math
 import jax.numpy as jnp
 import numpy as np
 
-from sphjax.cases._geometry import box_walls, check_positive, check_resolution, lattice, wall_layers
+from sphjax.cases._geometry import (
+    box_walls,
+    check_positive,
+    check_resolution,
+    lattice,
+    wall_layers,
+)
 from sphjax.cases._systems import finish_case, fluid_system, wall_system
 from sphjax.core.case import Case
 from sphjax.core.kernels import WendlandC2
@@ -15,6 +21,7 @@ from sphjax.core.model import Domain, Model
 from sphjax.core.params import make_params
 from sphjax.core.state import Kind, make_state
 from sphjax.physics.fluid.eos import tait_density
+from sphjax.physics.rigid.contact import WallContact
 from sphjax.physics.rigid.system import RigidSystem
 from sphjax.physics.solid.boundary import SolidBoundary
 
@@ -53,107 +60,205 @@ def floating_body(
       initial_draught: the body's initial draught over its height.
     """
     n = check_resolution("n", n, 4)
-    w = check_positive("body_width", body_width)
     hb = check_positive("body_height", body_height)
     ratio = check_positive("density_ratio", density_ratio)
     if not ratio < 1.0:
-        raise ValueError(f"density_ratio must be below 1 for the body to float, got {ratio}")
+        raise ValueError(
+            f"density_ratio must be below 1 for the body to float, got {ratio}; for a body "
+            "that sinks use sphjax.cases.sinking_body"
+        )
     if not 0.0 < initial_draught < 1.0:
         raise ValueError(
             f"initial_draught must lie in (0, 1) (of the height), got {initial_draught}"
         )
-    D = check_positive("water_depth", water_depth)
-    W = check_positive("tank_width", tank_width)
-    g = check_positive("gravity", gravity)
     dx = hb / n
-    nx_body = max(1, round(w / dx))
-    w = nx_body * dx
-    W = dx * round(W / dx)
+    D = check_positive("water_depth", water_depth)
     rows, rows_under = round(D / dx), max(1, round(initial_draught * hb / dx))
-    D, d0 = dx * rows, dx * rows_under
-    x0 = dx * round((W - w) / (2 * dx))  # the body's left face, on the lattice
-    y0 = dx * (rows - rows_under)  # its bottom, on the lattice
-    water = lattice([0.0, 0.0], [W, D], dx)
-    inside = (
-        (water[:, 0] > x0) & (water[:, 0] < x0 + w) & (water[:, 1] > y0) & (water[:, 1] < y0 + hb)
+    tank = _BodyInTank(
+        n, body_width, hb, ratio, rows - rows_under, water_depth, tank_width, gravity
     )
-    fluid = water[~inside]
-    body = lattice([x0, y0], [x0 + w, y0 + hb], dx)
-    kernel, h = WendlandC2(), 1.5 * dx
-    layers = wall_layers(kernel.support * h, dx)
-    tank_height = max(1.5 * D, y0 + 2 * hb)
-    walls = box_walls([0.0, 0.0], [W, tank_height], dx, layers, open_top=True)
-    x = np.concatenate([fluid, walls, body])
-    kind = np.concatenate(
-        [
-            np.full(len(fluid), Kind.FLUID),
-            np.full(len(walls), Kind.WALL),
-            np.full(len(body), Kind.RIGID),
-        ]
-    ).astype(np.int32)
-    is_fluid, is_body = jnp.asarray(kind == Kind.FLUID), jnp.asarray(kind == Kind.RIGID)
-    depth = jnp.asarray(np.where(kind == Kind.FLUID, D - x[:, 1], 0.0))
-    c0 = sound_speed_factor * math.sqrt(g * D)
-    params = make_params(
-        2,
-        gravity=(0.0, -g),
-        reference_density=WATER_DENSITY,
-        sound_speed=c0,
-        artificial_alpha=artificial_alpha,
-        solid_density=ratio * WATER_DENSITY,
-    )
-    cell = dx * dx
-
-    def initial_state(p):
-        """Hydrostatic water (eq. 12 inverted), masses ``rho0 dx^2``; the body's particles
-        at its density ``p.solid_density``."""
-        rho0 = p.reference_density
-        rho_f = tait_density(rho0 * (-p.gravity[-1]) * depth, rho0, p.sound_speed, GAMMA)
-        rho = jnp.where(is_body, p.solid_density, jnp.where(is_fluid, rho_f, rho0))
-        mass = jnp.where(is_body, p.solid_density, rho0) * cell
-        return make_state(x, 0.0, rho, mass, kind, volume=cell)
-
-    margin = (layers + 2) * dx
-    domain = Domain((-margin, -margin), (W + margin, 2.0 * tank_height + margin), (False, False))
-    model = Model(
-        dim=2,
-        smoothing_length=h,
-        kernel=kernel,
-        domain=domain,
-        systems=(
-            fluid_system(
-                density="continuity",
-                gamma=GAMMA,
-                artificial_viscosity=True,
-                density_diffusion="molteni",
-            ),
-            wall_system("no_slip"),
-            RigidSystem(SolidBoundary(no_slip=True)),
-        ),
-    )
-    draught = ratio * hb
+    draught = ratio * tank.body_height
+    d0 = dx * rows_under
+    w, W, D = tank.body_width, tank.tank_width, tank.water_depth
     info = dict(
-        n=n,
-        dx=dx,
-        body_width=w,
-        body_height=hb,
-        water_depth=D,
-        tank_width=W,
-        initial_bottom=y0,
         equilibrium_draught=draught,
         equilibrium_bottom=D + w * (draught - d0) / W - draught,
-        body_indices=tuple(int(i) for i in np.flatnonzero(kind == Kind.RIGID)),
-        heave_period=2 * math.pi * math.sqrt(draught / g),
+        heave_period=2 * math.pi * math.sqrt(draught / tank.gravity),
     )
-    return finish_case(
+    return tank.case(
         "floating_body",
-        initial_state(params),
-        model,
-        params,
+        RigidSystem(SolidBoundary(no_slip=True)),
+        sound_speed_factor,
+        artificial_alpha,
         t_end,
         info,
-        initial_state=initial_state,
     )
+
+
+def sinking_body(
+    n: int = 8,
+    body_width: float = 0.2,
+    body_height: float = 0.1,
+    density_ratio: float = 1.5,
+    release_height: float = 0.05,
+    water_depth: float = 0.3,
+    tank_width: float = 1.0,
+    gravity: float = 9.81,
+    sound_speed_factor: float = 20.0,
+    artificial_alpha: float = 0.1,
+    contact_frequency: float | None = None,
+    t_end: float = 1.5,
+) -> Case:
+    """A rectangular rigid body denser than water released in a tank: it sinks and comes
+    to rest on the floor (2D).
+
+    The body (``body_width x body_height``, density ``density_ratio`` times the water's,
+    ``Params.solid_density``) starts at rest, level, at the centre of the tank, its bottom
+    ``release_height`` above the floor, under water ``water_depth`` deep (hydrostatic).
+    The fluid and the body are the floating body's (:func:`floating_body`); the body has
+    wall contact (:class:`~sphjax.WallContact`, a spring-dashpot force between its
+    particles and the wall particles within 1.5 spacings, critically damped), so it comes
+    to rest with its bottom less than half a spacing above the floor.
+
+    Args:
+      n: particles across the body's height (``dx = body_height / n``).
+      release_height: the height of the body's bottom above the floor at the start.
+      contact_frequency: the contact's ``omega`` (rad/s); ``None``:
+        ``sqrt(100 g body_height) / dx``, which compresses the contact springs under the
+        body's weight by about ``dx / 100``.
+    """
+    n = check_resolution("n", n, 4)
+    hb = check_positive("body_height", body_height)
+    ratio = check_positive("density_ratio", density_ratio)
+    if not ratio > 1.0:
+        raise ValueError(
+            f"density_ratio must exceed 1 for the body to sink, got {ratio}; for a body "
+            "that floats use sphjax.cases.floating_body"
+        )
+    dx = hb / n
+    lift = check_positive("release_height", release_height)
+    D = check_positive("water_depth", water_depth)
+    rows_up = max(1, round(lift / dx))
+    if not rows_up * dx + hb < D:
+        raise ValueError(
+            f"release_height + body_height = {rows_up * dx + hb:g} must lie below "
+            f"water_depth = {D:g} (the body starts under water); lower release_height"
+        )
+    g = check_positive("gravity", gravity)
+    if contact_frequency is None:
+        contact_frequency = math.sqrt(100.0 * g * hb) / dx
+    contact = WallContact(frequency=check_positive("contact_frequency", contact_frequency))
+    tank = _BodyInTank(n, body_width, hb, ratio, rows_up, water_depth, tank_width, gravity)
+    return tank.case(
+        "sinking_body",
+        RigidSystem(SolidBoundary(no_slip=True), wall_contact=contact),
+        sound_speed_factor,
+        artificial_alpha,
+        t_end,
+        dict(contact_frequency=contact.frequency, contact_distance=contact.distance * dx),
+    )
+
+
+class _BodyInTank:
+    """The geometry of a rectangular body in an open tank of water, on one lattice: the
+    body ``bottom_rows`` spacings above the floor, centred; the water cut out where the
+    body is."""
+
+    def __init__(self, n, body_width, body_height, ratio, bottom_rows, depth, width, gravity):
+        w = check_positive("body_width", body_width)
+        D = check_positive("water_depth", depth)
+        W = check_positive("tank_width", width)
+        self.gravity = check_positive("gravity", gravity)
+        self.n, self.ratio, self.body_height = n, ratio, body_height
+        self.dx = dx = body_height / n
+        self.body_width = w = max(1, round(w / dx)) * dx
+        self.tank_width = W = dx * round(W / dx)
+        self.water_depth = D = dx * round(D / dx)
+        self.x0 = x0 = dx * round((W - w) / (2 * dx))  # the body's left face, on the lattice
+        self.y0 = y0 = dx * bottom_rows  # its bottom, on the lattice
+        hb = body_height
+        water = lattice([0.0, 0.0], [W, D], dx)
+        inside = (
+            (water[:, 0] > x0)
+            & (water[:, 0] < x0 + w)
+            & (water[:, 1] > y0)
+            & (water[:, 1] < y0 + hb)
+        )
+        self.fluid = water[~inside]
+        self.body = lattice([x0, y0], [x0 + w, y0 + hb], dx)
+
+    def case(self, name, rigid, sound_speed_factor, artificial_alpha, t_end, info) -> Case:
+        """The Case: fluid, tank walls and ``rigid`` (a :class:`RigidSystem`)."""
+        dx, g, D, W = self.dx, self.gravity, self.water_depth, self.tank_width
+        hb, fluid, body = self.body_height, self.fluid, self.body
+        kernel, h = WendlandC2(), 1.5 * dx
+        layers = wall_layers(kernel.support * h, dx)
+        tank_height = max(1.5 * D, self.y0 + 2 * hb)
+        walls = box_walls([0.0, 0.0], [W, tank_height], dx, layers, open_top=True)
+        x = np.concatenate([fluid, walls, body])
+        kind = np.concatenate(
+            [
+                np.full(len(fluid), Kind.FLUID),
+                np.full(len(walls), Kind.WALL),
+                np.full(len(body), Kind.RIGID),
+            ]
+        ).astype(np.int32)
+        is_fluid, is_body = jnp.asarray(kind == Kind.FLUID), jnp.asarray(kind == Kind.RIGID)
+        depth = jnp.asarray(np.where(kind == Kind.FLUID, D - x[:, 1], 0.0))
+        c0 = sound_speed_factor * math.sqrt(g * D)
+        params = make_params(
+            2,
+            gravity=(0.0, -g),
+            reference_density=WATER_DENSITY,
+            sound_speed=c0,
+            artificial_alpha=artificial_alpha,
+            solid_density=self.ratio * WATER_DENSITY,
+        )
+        cell = dx * dx
+
+        def initial_state(p):
+            """Hydrostatic water (eq. 12 inverted), masses ``rho0 dx^2``; the body's
+            particles at its density ``p.solid_density``."""
+            rho0 = p.reference_density
+            rho_f = tait_density(rho0 * (-p.gravity[-1]) * depth, rho0, p.sound_speed, GAMMA)
+            rho = jnp.where(is_body, p.solid_density, jnp.where(is_fluid, rho_f, rho0))
+            mass = jnp.where(is_body, p.solid_density, rho0) * cell
+            return make_state(x, 0.0, rho, mass, kind, volume=cell)
+
+        margin = (layers + 2) * dx
+        domain = Domain(
+            (-margin, -margin), (W + margin, 2.0 * tank_height + margin), (False, False)
+        )
+        model = Model(
+            dim=2,
+            smoothing_length=h,
+            kernel=kernel,
+            domain=domain,
+            systems=(
+                fluid_system(
+                    density="continuity",
+                    gamma=GAMMA,
+                    artificial_viscosity=True,
+                    density_diffusion="molteni",
+                ),
+                wall_system("no_slip"),
+                rigid,
+            ),
+        )
+        info = dict(
+            n=self.n,
+            dx=dx,
+            body_width=self.body_width,
+            body_height=hb,
+            water_depth=D,
+            tank_width=W,
+            initial_bottom=self.y0,
+            body_indices=tuple(int(i) for i in np.flatnonzero(kind == Kind.RIGID)),
+            **info,
+        )
+        return finish_case(
+            name, initial_state(params), model, params, t_end, info, initial_state=initial_state
+        )
 
 
 def body_bottom(states, case: Case):

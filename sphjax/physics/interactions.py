@@ -15,7 +15,9 @@ the formulation through :func:`sphjax.physics.pairs.pair_sum`.
 * fluid-solid and solid-fluid: the solid's particles as moving boundary particles for the
   fluid (the fluid-wall terms against the pressure, density and velocity of
   :func:`sphjax.physics.fsi.update_solid_boundary`), and every such pair force equal and
-  opposite on the solid (:mod:`sphjax.physics.fsi`).
+  opposite on the solid (:mod:`sphjax.physics.fsi`); the same for a rigid body;
+* rigid-wall: the contact force that keeps a rigid body off the walls
+  (:mod:`sphjax.physics.rigid.contact`); the walls do not move, so it has no reaction.
 
 Each function returns a dict with ``"a"`` (``[n_A, d]``) and, for fluids, ``"shift"``.
 """
@@ -344,6 +346,14 @@ def solid_fluid(solid_system: SolidSystem, solid, system: FluidSystem, fluid, pa
     return ctx.pair_sum(summand, rows, cols, pairs, _fluid_shared(system, ctx), weight="m")
 
 
+def rigid_wall(system: RigidSystem, body, wall_system: WallSystem, wall, pairs, ctx):
+    """Rigid-wall contact: the spring-dashpot force of ``system.wall_contact`` per unit
+    mass of the body's particles (:class:`~sphjax.WallContact`); none without it."""
+    if system.wall_contact is None:
+        return {"a": jnp.zeros_like(body["x"])}
+    return {"a": system.wall_contact.acceleration(body, wall, pairs, ctx)}
+
+
 #: (row system type, neighbour system type) -> interaction function
 INTERACTIONS = {
     (FluidSystem, FluidSystem): fluid_fluid,
@@ -354,6 +364,7 @@ INTERACTIONS = {
     # a rigid body is a moving boundary for the fluid as an elastic solid is
     (FluidSystem, RigidSystem): fluid_solid,
     (RigidSystem, FluidSystem): solid_fluid,
+    (RigidSystem, WallSystem): rigid_wall,
 }
 
 #: pairs of system types whose neighbour lists the update stage needs besides those of

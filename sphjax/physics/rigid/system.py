@@ -24,7 +24,9 @@ A fluid sees the body's particles as moving boundary particles, exactly as an el
 solid's (Adami, Hu & Adams 2012; :mod:`sphjax.physics.fsi`): pressure extrapolated from
 the fluid, hydrodynamic mass ``rho0_fluid V_i``, the body's velocity in the no-slip
 terms; the interactions are the elastic solid's ``fluid_solid`` and ``solid_fluid``,
-registered for this system.  Not yet: contact with walls or other bodies, 3D.
+registered for this system.  With ``wall_contact``, a spring-dashpot force keeps it off
+the walls (:mod:`sphjax.physics.rigid.contact`, the interaction ``rigid_wall``), summed
+into ``F`` and ``tau`` with the fluid's.  Not yet: contact between bodies, friction, 3D.
 """
 
 from __future__ import annotations
@@ -37,6 +39,7 @@ from sphjax.core.params import SOLID_DEFAULTS, refusal
 from sphjax.core.state import Kind
 from sphjax.physics import fsi
 from sphjax.physics.fluid.system import FluidSystem
+from sphjax.physics.rigid.contact import WallContact
 from sphjax.physics.solid.boundary import SolidBoundary
 from sphjax.physics.system import block_fields
 
@@ -81,9 +84,12 @@ class RigidSystem:
       boundary: :class:`~sphjax.SolidBoundary`, how a fluid sees the body (no-slip or free
         slip; ``acceleration=True`` uses the body's acceleration in the extrapolated
         pressure).
+      wall_contact: :class:`~sphjax.WallContact`, the contact force that keeps the body
+        off the walls, or ``None`` (no contact: a body that reaches a wall passes into it).
     """
 
     boundary: SolidBoundary = SolidBoundary()
+    wall_contact: WallContact | None = None
 
     kinds = (Kind.RIGID,)
     current_configuration = True
@@ -96,6 +102,11 @@ class RigidSystem:
         if not isinstance(self.boundary, SolidBoundary):
             raise ValueError(
                 f"RigidSystem.boundary must be SolidBoundary(...), got {self.boundary!r}"
+            )
+        if self.wall_contact is not None and not isinstance(self.wall_contact, WallContact):
+            raise ValueError(
+                "RigidSystem.wall_contact must be WallContact(frequency=...) or None, got "
+                f"{self.wall_contact!r}"
             )
 
     def parameters(self) -> frozenset[str]:
@@ -149,6 +160,8 @@ class RigidSystem:
         return None
 
     def time_step_limits(self, v_max: float, params, model, cfl: float) -> list[float]:
-        """None of its own: the fluid's acoustic limit covers it (``v_max`` enters the
-        fluid's)."""
-        return []
+        """The wall contact's (:meth:`WallContact.time_step_limit`); otherwise none of its
+        own: the fluid's acoustic limit covers it (``v_max`` enters the fluid's)."""
+        if self.wall_contact is None:
+            return []
+        return [self.wall_contact.time_step_limit()]

@@ -1,0 +1,155 @@
+"""Contact between a rigid body and the walls: a spring-dashpot force between particles.
+
+A body's particle ``a`` and a wall particle ``b`` closer than the contact distance
+``d_c = distance * dx_a`` (``dx_a = V_a^(1/d)``, the body's particle spacing) push
+apart along ``n_ab = (x_a - x_b) / r_ab`` with the normal force
+
+    F_ab = max(k_a delta_ab - c_a v_n, 0),   delta_ab = d_c - r_ab,
+    v_n = (v_a - v_b) . n_ab,   k_a = m_a omega^2,   c_a = 2 zeta sqrt(m_a k_a),
+
+a linear spring of overlap ``delta_ab`` and a dashpot on the normal relative velocity
+(Kelvin-Voigt; Cundall & Strack 1979), clamped at zero so that it never pulls the body
+onto the wall; and a tangential dashpot on the sliding velocity
+``v_t = v_a - v_b - v_n n_ab``, capped by Coulomb friction:
+
+    f_ab = F_ab n_ab - min(c_a |v_t|, mu F_ab) v_t / |v_t|.
+
+This is TrixiParticles.jl's rigid-body boundary contact (``RigidBoundaryContactModel``:
+a body particle and a wall particle within ``contact_distance``;
+``normal_contact_force_components`` with ``normal_stiffness`` and ``normal_damping``;
+``tangential_contact_force`` with ``tangential_damping`` and no tangential spring, capped
+at the friction coefficient times the normal force), with the stiffness per unit mass
+of the body's particle, ``omega^2``, and both dashpots a fraction ``zeta`` of the
+critical damping ``2 sqrt(m_a k_a)`` of that spring (as TrixiParticles'
+``LinearContactModel``).  The friction matters even on a level floor: a particle
+resting on the lattice of wall particles sits on a bump of the pair forces, and without
+it the body drifts off sideways.
+
+On a lattice the walls' first row of particles lies half a spacing behind the wall's
+surface and the body's half a spacing inside its face, so a face at a gap ``g`` from the
+wall has its particles ``dx + g`` from the wall's: with ``distance = 1.5`` the contact
+acts within half a spacing of the surfaces touching, and a body at rest on a floor under
+a load ``F`` per particle column stays ``0.5 dx - F / k`` above it.
+
+The forces ``f_ab`` enter the body's resultant force and torque with the fluid's
+(:func:`sphjax.physics.rigid.system.rigid_acceleration`); the walls do not move.
+
+References:
+  P. A. Cundall, O. D. L. Strack, "A discrete numerical model for granular assemblies",
+  Geotechnique 29 (1979) 47-65.
+  TrixiParticles.jl, ``src/schemes/structure/rigid_body/boundary_contact_models.jl`` and
+  ``contact_forces.jl``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+import math
+
+import jax
+import jax.numpy as jnp
+
+from sphjax.core.space import dot, scale
+
+
+def _check(name: str, value, *, at_least: float, strict: bool, fix: str) -> float:
+    number = (
+        float(value) if isinstance(value, int | float) and not isinstance(value, bool) else None
+    )
+    if (
+        number is None
+        or not math.isfinite(number)
+        or not (number > at_least if strict else number >= at_least)
+    ):
+        relation = ">" if strict else ">="
+        raise ValueError(
+            f"WallContact.{name} must be a number {relation} {at_least:g}, got {value!r}; {fix}"
+        )
+    return number
+
+
+@dataclasses.dataclass(frozen=True)
+class WallContact:
+    """Contact of a rigid body with the walls (module docstring): a spring-dashpot force
+    between its particles and the wall particles within ``distance`` particle spacings.
+
+    Attributes:
+      frequency: ``omega`` in rad/s, the stiffness per unit mass of a body particle's
+        spring, ``k = m omega^2``.  A body of ``n`` particles across its height resting on
+        a floor compresses its springs by about ``n g / omega^2``.
+      damping_ratio: ``zeta``, the dashpot's fraction of critical damping (1: a particle
+        on its spring comes to rest without bouncing).
+      distance: the contact distance in the body's particle spacings (> 1: the force
+        starts before the surfaces touch; it must stay within the kernel's support, where
+        the neighbour lists reach).
+      friction: ``mu``, the Coulomb coefficient that caps the tangential dashpot's force
+        (0: the body slides freely).
+    """
+
+    frequency: float
+    damping_ratio: float = 1.0
+    distance: float = 1.5
+    friction: float = 0.5
+
+    def __post_init__(self):
+        fix = "e.g. WallContact(frequency=800.0, damping_ratio=1.0, distance=1.5)"
+        object.__setattr__(
+            self,
+            "frequency",
+            _check("frequency", self.frequency, at_least=0.0, strict=True, fix=fix),
+        )
+        object.__setattr__(
+            self,
+            "damping_ratio",
+            _check("damping_ratio", self.damping_ratio, at_least=0.0, strict=False, fix=fix),
+        )
+        object.__setattr__(
+            self, "distance", _check("distance", self.distance, at_least=1.0, strict=True, fix=fix)
+        )
+        object.__setattr__(
+            self, "friction", _check("friction", self.friction, at_least=0.0, strict=False, fix=fix)
+        )
+
+    def time_step_limit(self) -> float:
+        """``0.2 / omega``: about 30 steps a period of one particle's spring (a body's
+        own contact frequency, ``omega`` over the square root of its particles per
+        column, is lower)."""
+        return 0.2 / self.frequency
+
+    def acceleration(self, body: dict, wall: dict, pairs, ctx) -> jax.Array:
+        """``sum_b f_ab / m_a`` of each body particle ``a`` over the wall particles ``b``
+        (``body``: ``x, v, V``; ``wall``: ``x, v``)."""
+        summand = functools.partial(
+            contact_summand,
+            frequency=self.frequency,
+            damping_ratio=self.damping_ratio,
+            distance=self.distance,
+            friction=self.friction,
+        )
+        rows = {"x": body["x"], "v": body["v"], "V": body["V"]}
+        cols = {"x": wall["x"], "v": wall["v"]}
+        return ctx.pair_sum(summand, rows, cols, pairs)["a"]
+
+
+def contact_summand(pair, a, b, shared, *, frequency, damping_ratio, distance, friction):
+    """``f_ab / m_a`` (module docstring): ``max(omega^2 delta_ab - 2 zeta omega v_n, 0)``
+    along ``n_ab``, less the tangential dashpot ``2 zeta omega v_t`` capped at ``mu`` times
+    that; zero beyond the contact distance, for padding and at ``r = 0``."""
+    dim = pair.dr.shape[-1]
+    reach = distance * a["V"] ** (1.0 / dim)
+    touching = pair.mask & (pair.r > 0.0) & (pair.r < reach)
+    r = jnp.where(touching, pair.r, 1.0)  # the double-where: no 1/0 in the derivative
+    normal = scale(1.0 / r, pair.dr)
+    relative_velocity = a["v"] - b["v"]
+    normal_velocity = dot(relative_velocity, normal)
+    damping = 2.0 * damping_ratio * frequency
+    push = frequency**2 * (reach - r) - damping * normal_velocity
+    normal_force = jnp.where(touching, jnp.maximum(push, 0.0), 0.0)
+    sliding = relative_velocity - scale(normal_velocity, normal)
+    speed_squared = dot(sliding, sliding)
+    moving = touching & (speed_squared > 0.0)
+    speed = jnp.sqrt(jnp.where(moving, speed_squared, 1.0))
+    # c |v_t| capped at mu F_n, as a coefficient of v_t
+    drag = jnp.where(moving, jnp.minimum(damping, friction * normal_force / speed), 0.0)
+    return {"a": scale(normal_force, normal) - scale(drag, sliding)}
