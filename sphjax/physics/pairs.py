@@ -317,6 +317,8 @@ def _reduce_pairs(per_pair, shape):
     """Each per-pair array of ``per_pair`` (broadcast to ``[B, K, ...]``) summed over the
     neighbour axis, in one reduction over their stack: XLA then computes every per-pair
     cotangent in one loop instead of one loop (and one stored array) per output."""
+    if not per_pair:  # no cotangent wanted from this sum's pairs
+        return []
     full = [
         jnp.broadcast_to(q, shape + jnp.shape(q)[2:])
         if jnp.ndim(q) >= 2

@@ -39,10 +39,11 @@ def _kernel_pullback(pair, a, b, shared, bar):
 
 
 pair_sums.define_pullback(_kernel_summand, _kernel_pullback)
-# measured on the CPU: autodiff's transpose (9.6 ms) beats the custom adjoint (14.0 ms) at
-# Taylor-Green 10k (docs/performance_gradients.md); the pull-back stays, tested, for
-# `benchmarks/pair_costs.py` to re-measure on other hardware
-pair_sums.transpose_by_autodiff(_kernel_summand)
+# measured on the CPU (docs/performance_gradients.md): alone, autodiff's transpose of this
+# sum (9.6 ms) beats the custom adjoint in blocks (14.0 ms) at Taylor-Green 10k, but in a
+# whole gradient the two cost the same (18.5 and 18.9 CPU-s), and without blocks
+# (``Model.pair_block`` at least the particle count, as the Taylor-Green case sets) the
+# custom adjoint fuses with the momentum sum's and the gradient costs 15.5 CPU-s
 
 
 def _velocity_divergence_summand(pair, a, b, shared):
