@@ -25,8 +25,9 @@ from pathlib import Path
 ENV = "SPHJAX_CACHE_DIR"
 OFF = ("", "0", "off", "none", "false", "no")
 
-#: every program is cached: a run compiles some 160 small ones besides its chunk (most
-#: under 0.1 s, together more than half the compile time of a small run)
+#: every program is cached: besides its chunk a run compiles its set-up's programs (a
+#: case's packing and initial state, the neighbour allocation) and a few of jax-md's small
+#: ones, most under 0.3 s, together about half the compile time of a small run
 MIN_COMPILE_SECONDS = 0.0
 
 

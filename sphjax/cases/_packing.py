@@ -29,23 +29,20 @@ import functools
 import jax
 import jax.numpy as jnp
 import numpy as np
-from scipy.spatial import cKDTree
 
 from sphjax import kernels
+from sphjax._host import device_array
+from sphjax.core.neighbors import points_within
 
 
 def periodic_neighbours(x, box: float, radius: float) -> np.ndarray:
     """``[N, K]`` indices of the particles within ``radius`` (minimum image in the square
-    periodic box ``[0, box)^d``), padded with ``N``; the particle itself is left out."""
+    periodic box ``[0, box)^d``, distance ``<= radius``), padded with ``N``; the particle
+    itself is left out.  Each row lists its neighbours in increasing index order."""
     x = np.mod(np.asarray(x, float), box)
-    tree = cKDTree(x, boxsize=box)
-    lists = tree.query_ball_point(x, radius)
-    k = max(1, max(len(found) for found in lists) - 1)
-    idx = np.full((len(x), k), len(x), np.int32)
-    for a, found in enumerate(lists):
-        others = [b for b in found if b != a]
-        idx[a, : len(others)] = others
-    return idx
+    dim = x.shape[1]
+    box = (float(box),) * dim
+    return points_within(x, radius, (0.0,) * dim, box, (True,) * dim, closed=True)
 
 
 def _pair_weights(x, idx, box, kernel, h):
@@ -106,8 +103,9 @@ def relax_periodic(
     """
     # float32 whatever jax_enable_x64 says, so that a case builds the same positions in
     # float32 and float64 sessions
-    x = jnp.asarray(np.mod(np.asarray(x, float), box), jnp.float32)
-    d = jnp.zeros_like(x)
+    # (numpy arguments: the jitted block takes them without an eager conversion program)
+    x = np.mod(np.asarray(x, float), box).astype(np.float32)
+    d = np.zeros_like(x)
     spread = float("nan")
     done = 0
     count = rebuild_every
@@ -120,8 +118,8 @@ def relax_periodic(
         x_new, d_new, spread_new = _relax_block(
             x,
             d,
-            jnp.asarray(idx),
-            jnp.asarray(count, jnp.int32),
+            idx,
+            np.int32(count),
             kernel=kernel,
             h=float(h),
             box=float(box),
@@ -150,12 +148,12 @@ def summation_masses(x, idx, box: float, kernel, h: float, density, tol: float |
     Returns:
       ``[N]`` masses (conjugate gradients from ``density * V_a``, ``V_a = 1 / sum_b W_ab``).
     """
-    density = jnp.asarray(density)
+    density = device_array(density)
     if tol is None:
         tol = 1e-12 if density.dtype == jnp.float64 else 1e-6
     return _solve_masses(
-        jnp.asarray(x, density.dtype),
-        jnp.asarray(idx),
+        device_array(x, density.dtype),
+        device_array(idx),
         density,
         kernel=kernel,
         h=float(h),

@@ -2,11 +2,14 @@
 
 from __future__ import annotations
 
+import functools
 import math
 
+import jax
 import jax.numpy as jnp
 import numpy as np
 
+from sphjax._host import device_array
 from sphjax._text import show
 from sphjax.cases._geometry import box_walls, check_positive, check_resolution, lattice, wall_layers
 from sphjax.cases._packing import periodic_neighbours, relax_periodic, summation_masses
@@ -137,14 +140,19 @@ def taylor_green(
 
     def initial_state(p):
         """Density of the analytic pressure (eq. 12 inverted) and masses from ``p``."""
-        rho0_p, p0_p = p.reference_density, p.reference_pressure
-        pressure = rho0_p * jnp.asarray(pressure_shape)
-        rho = tait_density(pressure + p0_p, rho0_p, p.sound_speed, gamma, p0_p)
-        if relaxed:
-            mass = summation_masses(x, neighbours, 1.0, kernel, h, rho)
-        else:
-            mass = rho0_p * dx**2
-        return make_state(x, u, rho, mass, Kind.FLUID)
+        # device arrays, not numpy: a jitted function hands an argument it returns
+        # unchanged back as it came (the positions, under jax.grad)
+        return _taylor_green_state(
+            p,
+            device_array(x),
+            device_array(u),
+            device_array(pressure_shape),
+            device_array(neighbours) if relaxed else None,
+            kernel=kernel,
+            h=float(h),
+            dx=float(dx),
+            gamma=gamma,
+        )
 
     model = Model(
         dim=2,
@@ -175,6 +183,22 @@ def taylor_green(
         relax_iterations=int(relax_iterations),
     )
     return _finish("taylor_green", state, model, params, t_end, info, initial_state=initial_state)
+
+
+@functools.partial(jax.jit, static_argnames=("kernel", "h", "dx", "gamma"))
+def _taylor_green_state(p, x, u, pressure_shape, neighbours, *, kernel, h, dx, gamma):
+    """The Taylor-Green State for Params ``p`` (one compiled program; the geometry comes
+    in as arguments): the density of the analytic pressure ``rho0 * pressure_shape``
+    (eq. 12 inverted) and, with ``neighbours`` (the relaxed start), the masses for which
+    summation density gives it (eq. 5), else ``rho0 dx^2``."""
+    rho0_p, p0_p = p.reference_density, p.reference_pressure
+    pressure = rho0_p * pressure_shape
+    rho = tait_density(pressure + p0_p, rho0_p, p.sound_speed, gamma, p0_p)
+    if neighbours is not None:
+        mass = summation_masses(x, neighbours, 1.0, kernel, h, rho)
+    else:
+        mass = rho0_p * dx**2
+    return make_state(x, u, rho, mass, Kind.FLUID)
 
 
 def taylor_green_velocity(position, t, case: Case):

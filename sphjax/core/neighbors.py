@@ -27,7 +27,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from sphjax._jax_md import modules as _jax_md_modules
-from sphjax.core.space import displacement_fn, minimum_image
+from sphjax.core.space import displacement_fn
 
 partition, jmd_space = _jax_md_modules("partition", "space")
 
@@ -124,7 +124,7 @@ class NeighborSearch:
             width = max(1, int(math.ceil(most * (1.0 + margin))) + int(extra_capacity), at_least)
             if width < capacity(neighbors):
                 # jax-md packs each row's neighbours first: the columns cut hold padding
-                neighbors = neighbors.set(idx=jnp.asarray(idx[:, :width]), max_occupancy=width)
+                neighbors = neighbors.set(idx=jax.device_put(idx[:, :width]), max_occupancy=width)
         return neighbors
 
     def _allocate(self, x, extra_capacity: int):
@@ -177,9 +177,9 @@ class NeighborSearch:
         occupancy = int(most * self.model.neighbor_capacity + extra_capacity)
         occupancy = min(occupancy, width, n - 1)
         return full.set(
-            idx=jnp.asarray(idx[:, :occupancy]),
+            idx=jax.device_put(np.ascontiguousarray(idx[:, :occupancy])),
             max_occupancy=occupancy,
-            reference_position=jnp.asarray(x),
+            reference_position=jax.device_put(x),
         )
 
     def update(self, position, neighbors):
@@ -258,15 +258,38 @@ def reference_neighbors(reference_position, members, model) -> np.ndarray:
 
 def _reference_search(X, members, model) -> np.ndarray:
     """:func:`reference_neighbors` without the cache: a vectorised cell list."""
-    n, dim = X.shape
-    m = members.shape[0]
-    if m == 0:
+    n = X.shape[0]
+    if members.shape[0] == 0:
         return np.full((0, 1), n, dtype=np.int32)
-    Xm = X[members]
-    cutoff = float(model.cutoff)
-    size = np.array(model.domain.size, dtype=np.float64)
-    periodic = np.array(model.domain.periodic, dtype=bool)
-    lower = np.where(periodic, np.array(model.domain.lower, dtype=np.float64), Xm.min(0))
+    domain = model.domain
+    local = points_within(X[members], model.cutoff, domain.lower, domain.size, domain.periodic)
+    padded = np.append(members, n).astype(np.int32)  # the padding (m) becomes n
+    return padded[local]
+
+
+def points_within(x, radius: float, lower, size, periodic, closed: bool = False) -> np.ndarray:
+    """``[M, K]`` indices of the points of ``x`` (``[M, d]``, numpy) closer than
+    ``radius`` to each (``closed``: or at ``radius``; minimum image on the ``periodic``
+    axes of the box ``lower``, ``size``), the point itself left out; each row in
+    increasing index order, padded with ``M``.
+
+    A vectorised cell list: the points are sorted by cell, and every point's candidates
+    are the points of its own and the adjacent cells, filtered by distance; up to
+    ``DENSE_SEARCH_PAIRS`` pairs, all pairs are filtered (faster at that size).
+    """
+    Xm = np.asarray(x, dtype=np.float64)
+    m, dim = Xm.shape
+    if m == 0:
+        return np.full((0, 1), 0, dtype=np.int32)
+    cutoff = float(radius)
+    size = np.array(size, dtype=np.float64)
+    periodic = np.array(periodic, dtype=bool)
+    if m * m <= DENSE_SEARCH_PAIRS:
+        r2 = _squared_distances(Xm[:, None, :], Xm[None, :, :], size, periodic)
+        close = (r2 <= cutoff**2) if closed else (r2 < cutoff**2)
+        np.fill_diagonal(close, False)
+        return _padded_rows(*np.nonzero(close), m)
+    lower = np.where(periodic, np.array(lower, dtype=np.float64), Xm.min(0))
     extent = np.where(periodic, size, Xm.max(0) - lower)
     # cells at least ``cutoff`` wide; a periodic axis with fewer than 3 cells is one cell
     n_cells = np.maximum(1, np.floor(extent / cutoff).astype(np.int64))
@@ -302,16 +325,37 @@ def _reference_search(X, members, model) -> np.ndarray:
             cols.append(col)
     row = np.concatenate(rows)
     col = np.concatenate(cols)
-    dr = minimum_image(Xm[row] - Xm[col], size, periodic)
-    close = (np.sum(dr * dr, axis=1) < cutoff**2) & (row != col)
+    r2 = _squared_distances(Xm[row], Xm[col], size, periodic)
+    close = ((r2 <= cutoff**2) if closed else (r2 < cutoff**2)) & (row != col)
     row, col = row[close], col[close]
     pair_order = np.argsort(row * m + col)
-    row, col = row[pair_order], col[pair_order]
+    return _padded_rows(row[pair_order], col[pair_order], m)
+
+
+#: the most pairs :func:`points_within` filters all at once rather than by cells
+DENSE_SEARCH_PAIRS = 1_000_000
+
+
+def _squared_distances(a, b, size, periodic) -> np.ndarray:
+    """``|a - b|^2`` (numpy, broadcast over the leading axes), minimum image on the
+    ``periodic`` axes; summed axis by axis as ``np.sum`` would."""
+    r2 = 0.0
+    for k in range(a.shape[-1]):
+        d = a[..., k] - b[..., k]
+        if periodic[k]:
+            d = d - size[k] * np.round(d / size[k])
+        r2 = r2 + d * d
+    return r2
+
+
+def _padded_rows(row, col, m: int) -> np.ndarray:
+    """``[m, K]`` rows of the pairs ``(row, col)`` (sorted by row, then col), padded
+    with ``m``."""
     counts = np.bincount(row, minlength=m)
     width = max(1, int(counts.max(initial=0)))
     slot = np.arange(row.shape[0]) - np.repeat(np.cumsum(counts) - counts, counts)
-    idx = np.full((m, width), n, dtype=np.int32)
-    idx[row, slot] = members[col]
+    idx = np.full((m, width), m, dtype=np.int32)
+    idx[row, slot] = col
     return idx
 
 

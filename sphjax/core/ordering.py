@@ -69,7 +69,7 @@ def permute(tree, perm, axis: int = 0):
     if traced or jax.default_backend() != "cpu":
         taken = _take(arrays, jnp.asarray(perm), axis)
     else:  # concrete arrays in host memory: numpy, nothing to compile
-        taken = [jnp.asarray(np.take(np.asarray(a), perm, axis=axis)) for a in arrays]
+        taken = [jax.device_put(np.take(np.asarray(a), perm, axis=axis)) for a in arrays]
     for i, a in zip(which, taken, strict=True):
         leaves[i] = a
     return jax.tree_util.tree_unflatten(treedef, leaves)

@@ -35,6 +35,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from sphjax._host import device_array
 from sphjax._text import show
 from sphjax.core.pytree import pytree_dataclass
 
@@ -281,7 +282,7 @@ def refusal(name: str, system: str, why: str, fix: str) -> str:
 def _as_float(value, dtype):
     if isinstance(value, jax.core.Tracer):
         return value
-    return jnp.asarray(value, dtype)
+    return device_array(value, dtype)
 
 
 def make_params(dim: int, *, gravity=None, fluid=None, solid=None, **values) -> Params:
@@ -317,7 +318,7 @@ def make_params(dim: int, *, gravity=None, fluid=None, solid=None, **values) -> 
             continue
         merged = {k: _as_float(values.get(k, v), dtype) for k, v in defaults.items()}
         groups[group] = (FluidParams if group == "fluid" else SolidParams)(**merged)
-    gravity = jnp.zeros(dim, dtype) if gravity is None else jnp.asarray(gravity, dtype)
+    gravity = device_array(np.zeros(dim) if gravity is None else gravity, dtype)
     check_value("gravity", gravity)
     if gravity.shape != (dim,):
         raise ValueError(f"Params.gravity must have shape ({dim},), got {gravity.shape}")

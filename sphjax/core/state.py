@@ -16,6 +16,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from sphjax._host import is_traced
 from sphjax.core.pytree import pytree_dataclass
 
 Array = jax.Array
@@ -81,14 +82,20 @@ def make_state(position, velocity, density, mass, kind, volume=None) -> State:
 
     Particles must come grouped by kind in ascending order (fluid, wall, solid; solid and
     clamped particles together in any order), one contiguous block per system.
+
+    Concrete arguments are combined in numpy and handed over in one transfer per array
+    (no program to compile); traced ones (a case's ``initial_state`` under ``jax.grad``
+    or ``jit``) in jax.numpy.
     """
-    position = jnp.asarray(position, dtype=jnp.result_type(float))
+    traced = is_traced(position, velocity, density, mass, kind, volume)
+    xp = jnp if traced else np
+    dtype = jnp.result_type(float)
+    position = xp.asarray(position, dtype=dtype)
     n, d = position.shape
-    dtype = position.dtype
-    velocity = jnp.broadcast_to(jnp.asarray(velocity, dtype), (n, d))
-    density = jnp.broadcast_to(jnp.asarray(density, dtype), (n,))
-    mass = jnp.broadcast_to(jnp.asarray(mass, dtype), (n,))
-    kind = jnp.broadcast_to(jnp.asarray(kind, jnp.int32), (n,))
+    velocity = xp.broadcast_to(xp.asarray(velocity, dtype), (n, d))
+    density = xp.broadcast_to(xp.asarray(density, dtype), (n,))
+    mass = xp.broadcast_to(xp.asarray(mass, dtype), (n,))
+    kind = xp.broadcast_to(xp.asarray(kind, np.int32), (n,))
     order = np.asarray(kind) if not isinstance(kind, jax.core.Tracer) else np.zeros(0)
     system_of = np.minimum(order, int(Kind.SOLID))  # solid and clamped: one system
     if order.size and not np.all(np.diff(system_of) >= 0):
@@ -96,23 +103,23 @@ def make_state(position, velocity, density, mass, kind, volume=None) -> State:
             "make_state: particles must be grouped by kind (fluid, then wall, then solid "
             "and clamped particles): sort them by kind before building the State"
         )
-    volume = (
-        mass / density if volume is None else jnp.broadcast_to(jnp.asarray(volume, dtype), (n,))
-    )
-    return State(
+    volume = mass / density if volume is None else xp.broadcast_to(xp.asarray(volume, dtype), (n,))
+    fields = dict(
         position=position,
         velocity=velocity,
         density=density,
         mass=mass,
         kind=kind,
-        reference_position=position,
         volume=volume,
-        acceleration=jnp.zeros((n, d), dtype),
-        density_rate=jnp.zeros((n,), dtype),
-        pressure=jnp.zeros((n,), dtype),
-        shift_acceleration=jnp.zeros((n, d), dtype),
-        time=jnp.zeros((), dtype),
+        acceleration=xp.zeros((n, d), dtype),
+        density_rate=xp.zeros((n,), dtype),
+        pressure=xp.zeros((n,), dtype),
+        shift_acceleration=xp.zeros((n, d), dtype),
+        time=xp.zeros((), dtype),
     )
+    if not traced:
+        fields = {name: jax.device_put(np.array(a)) for name, a in fields.items()}
+    return State(reference_position=fields["position"], **fields)
 
 
 @pytree_dataclass

@@ -20,7 +20,6 @@ import dataclasses
 import math
 
 import numpy as np
-from scipy import ndimage
 
 from sphjax._text import show
 
@@ -138,6 +137,8 @@ def wall_layers(shape, dx, layers: int, side: str = "outside", open_top=False, o
     pad = (layers if side == "outside" else 1) * dx
     points, counts = _grid(lower - pad, upper + pad, dx, origin)
     inside = shape.contains(points).reshape(counts)
+    from scipy import ndimage  # here: 0.05 s that every sphjax command would pay at import
+
     structure = np.ones((3,) * shape.dim, bool)
     if side == "outside":
         near = ndimage.binary_dilation(inside, structure, iterations=int(layers))

@@ -25,6 +25,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from sphjax._host import device_array, inside_trace
 from sphjax._text import show
 from sphjax.core import ordering
 from sphjax.core.case import Case
@@ -295,8 +296,26 @@ def _run_until_stopped(carry, frames, dt, params, start, stop, *, model, save_ev
     return jax.lax.while_loop(running, one_step, (carry, frames))
 
 
+def _run_chunk_checked(carry, frames, dt, params, start, stop, first, *, model, save_every):
+    """:func:`_run_until_stopped`, after the run's first evaluation if ``first`` (the
+    stepper's ``init``: the rates of the initial state; in the chunk's program rather than
+    a program of its own, which would cost a small run's start-up about 0.3 s to compile).
+    Returns ``(carry, frames, initial, overflow)``: ``initial`` is the state the steps
+    started from, ``overflow`` whether the last carry's lists overflowed."""
+    state = jax.lax.cond(
+        first,
+        lambda s: stepper_for(model).init((s, carry[1]), params)[0],
+        lambda s: s,
+        carry[0],
+    )
+    carry, frames = _run_until_stopped(
+        (state, *carry[1:]), frames, dt, params, start, stop, model=model, save_every=save_every
+    )
+    return carry, frames, state, overflowed(carry[1]).astype(bool)
+
+
 _run_chunk = jax.jit(
-    _run_until_stopped, static_argnames=("model", "save_every"), donate_argnums=(1,)
+    _run_chunk_checked, static_argnames=("model", "save_every"), donate_argnums=(1,)
 )
 
 
@@ -307,7 +326,7 @@ def _concrete(traced: bool):
     """``jax.ensure_compile_time_eval()`` inside a trace (``traced`` inputs or an outer
     ``jit``), where the set-up must stay concrete; outside one a no-op: compile-time
     evaluation would run the compiled set-up programs op by op, compiling each op."""
-    inside = traced or isinstance(jnp.asarray(0), jax.core.Tracer)
+    inside = traced or inside_trace()
     return jax.ensure_compile_time_eval() if inside else contextlib.nullcontext()
 
 
@@ -315,12 +334,32 @@ def _is_traced(*trees) -> bool:
     return any(isinstance(x, jax.core.Tracer) for x in jax.tree_util.tree_leaves(trees))
 
 
+def _on_host(*trees) -> bool:
+    """Whether ``trees`` hold concrete arrays in host memory (the CPU backend): then the
+    drivers' bookkeeping (stacking frames, frame times) runs in numpy, compiling nothing."""
+    return jax.default_backend() == "cpu" and not _is_traced(*trees)
+
+
 def _stack(frames: list[State]) -> State:
+    if _on_host(frames):
+        return jax.tree_util.tree_map(
+            lambda *xs: jax.device_put(np.concatenate([np.asarray(x) for x in xs])), *frames
+        )
     return jax.tree_util.tree_map(lambda *xs: jnp.concatenate(xs, axis=0), *frames)
 
 
 def _expand(state: State) -> State:
+    if _on_host(state):
+        return jax.tree_util.tree_map(lambda x: jax.device_put(np.asarray(x)[None]), state)
     return jax.tree_util.tree_map(lambda x: x[None], state)
+
+
+def _times(steps, dt):
+    """``steps * dt`` in the precision of ``dt`` (numpy for a concrete ``dt``)."""
+    if _is_traced(dt):
+        return jnp.asarray(steps, dt.dtype) * dt
+    dt = np.asarray(dt)
+    return jax.device_put(np.asarray(steps, dt.dtype) * dt)
 
 
 def _failure_reason(state: State, model: Model, row: int) -> str:
@@ -449,7 +488,7 @@ def simulate(
         _check_finite(state)
         check_time_step(float(dt), state, model, params)
         _check_inside(state, model)
-    dt = jnp.asarray(dt, state.position.dtype)
+    dt = device_array(dt, state.position.dtype)
 
     neighbor_state = state if not _is_traced(state) else case.state
     order = None
@@ -475,7 +514,8 @@ def simulate(
             margin=None if traced else NEIGHBOR_MARGIN,
         )
     # the solids' reference quantities (L0), once per run, from the (maybe traced) state
-    neighbors = _with_reference(state, neighbors, model)
+    if not all(system.current_configuration for system in model.systems):
+        neighbors = _with_reference(state, neighbors, model)
     if traced:
         run = functools.partial(_simulate_traced, checkpoint_every=checkpoint_every, order=order)
     else:
@@ -492,8 +532,7 @@ def simulate(
     steps = np.concatenate(
         [[0], np.arange(1, n_frames + 1) * save_every, [n_steps] if rest else []]
     )
-    times = jnp.asarray(steps, dt.dtype) * dt
-    return Trajectory(states=states, times=times)
+    return Trajectory(states=states, times=_times(steps, dt))
 
 
 def _in_user_order(on_frames, back, states, times):
@@ -503,7 +542,7 @@ def _in_user_order(on_frames, back, states, times):
 
 def _initial_carry(state, neighbors):
     """``(state, neighbors, failure, step)``: no failure recorded (-1, -1), step 0."""
-    return state, neighbors, -jnp.ones(2, jnp.int32), jnp.zeros((), jnp.int32)
+    return state, neighbors, np.full(2, -1, np.int32), np.zeros((), np.int32)
 
 
 def _simulate_traced(state, neighbors, dt, params, model, *, segments, checkpoint_every, order):
@@ -533,12 +572,6 @@ def _simulate_traced(state, neighbors, dt, params, model, *, segments, checkpoin
     return _stack(all_frames)
 
 
-@functools.partial(jax.jit, static_argnames="model")
-def _init(state, neighbors, params, model):
-    """The stepper's first state, rates evaluated (compiled once per Model and shape)."""
-    return stepper_for(model).init((state, neighbors), params)[0]
-
-
 def _simulate_in_chunks(
     state,
     neighbors,
@@ -555,22 +588,8 @@ def _simulate_in_chunks(
     """Compiled chunks of at most ``steps_per_chunk`` steps with concrete checks between
     them: a neighbour overflow re-allocates and repeats the chunk; an unstable run hands
     the frames before the failure to ``on_frames`` and raises.  Returns the frames."""
-    state = _init(state, neighbors, params, model)
-    bad = ~np.all(np.isfinite(np.asarray(state.acceleration)), axis=-1)
-    if bad.any():
-        particle = int(np.argmax(bad))
-        particle = particle if order is None else int(order[particle])
-        raise SimulationError(
-            f"the initial state has a non-finite acceleration at particle {particle} "
-            "(step 0); check the initial density, mass and spacing of the case",
-            step=0,
-            particle=particle,
-            time=0.0,
-        )
-    all_frames = [_expand(state)]
-    if on_frames is not None:
-        on_frames(all_frames[0], jnp.zeros(1))
     carry = _initial_carry(state, neighbors)
+    all_frames = []
     extra = [0]  # neighbour slots added beyond the allocation's own estimate
     base = 0  # steps before the current segment
     for save_every, n_frames in segments:
@@ -579,12 +598,17 @@ def _simulate_in_chunks(
         while done < n_frames:
             k = min(frames_per_chunk, n_frames - done)
             start = base + done * save_every
-            carry, frames = _run_chunk_growing(
-                carry, dt, params, model, save_every, k, start, extra
+            carry, frames, initial = _run_chunk_growing(
+                carry, dt, params, model, save_every, k, start, extra, first=not all_frames
             )
+            if not all_frames:  # the first chunk: the initial state, its rates evaluated
+                _check_initial_rates(initial, order)
+                all_frames.append(_expand(initial))
+                if on_frames is not None:
+                    on_frames(all_frames[0], _times([0], dt))
             end_steps = start + (1 + np.arange(k)) * save_every
-            frame_times = jnp.asarray(end_steps, dt.dtype) * dt
-            fail_step = int(carry[2][0])
+            frame_times = _times(end_steps, dt)
+            fail_step = int(np.asarray(carry[2])[0])
             if fail_step >= 0:
                 good = int(np.sum(end_steps < fail_step))
                 kept = jax.tree_util.tree_map(operator.itemgetter(slice(good)), frames)
@@ -601,26 +625,50 @@ def _simulate_in_chunks(
     return _stack(all_frames)
 
 
-def _run_chunk_growing(carry, dt, params, model, save_every, n_frames, start, extra):
+def _check_initial_rates(state, order):
+    """A SimulationError if the initial ``state`` has a non-finite acceleration."""
+    bad = ~np.all(np.isfinite(np.asarray(state.acceleration)), axis=-1)
+    if bad.any():
+        particle = int(np.argmax(bad))
+        particle = particle if order is None else int(order[particle])
+        raise SimulationError(
+            f"the initial state has a non-finite acceleration at particle {particle} "
+            "(step 0); check the initial density, mass and spacing of the case",
+            step=0,
+            particle=particle,
+            time=0.0,
+        )
+
+
+def _run_chunk_growing(carry, dt, params, model, save_every, n_frames, start, extra, first):
     """``n_frames`` frames of ``save_every`` steps from step ``start``; at a neighbour-list
     overflow, re-allocate and go on from the step before it.
 
     The split lists are re-allocated from the most neighbours (and rows with neighbours)
     they met (``Neighbors.counts``, the overflowing step's included; a dam break's fluid
     spreading along the floor meets ever more wall particles).  An overflow of the search
-    itself, which jax-md does not count, raises ``extra``, kept for later chunks.  Returns
-    the last carry and the frames (those after an unstable step are not filled)."""
-    frames = jax.tree_util.tree_map(lambda x: jnp.zeros((n_frames, *x.shape), x.dtype), carry[0])
+    itself, which jax-md does not count, raises ``extra``, kept for later chunks.  With
+    ``first``, the chunk begins with the run's first evaluation.  Returns the last carry,
+    the frames (those after an unstable step are not filled) and, with ``first``, the
+    initial state with its rates (else ``None``)."""
+    zeros = np.zeros if _on_host(carry[0]) else jnp.zeros
+    frames = jax.tree_util.tree_map(
+        lambda x: jax.device_put(zeros((n_frames, *x.shape), x.dtype)), carry[0]
+    )
     stop = start + n_frames * save_every
     stuck = 0  # re-allocations at the same step
+    initial = None
+    static = dict(model=model, save_every=save_every)
     while True:
         before = int(carry[3])
-        carry, frames = _run_chunk(
-            carry, frames, dt, params, start, stop, model=model, save_every=save_every
+        carry, frames, started, lost_any = _run_chunk(
+            carry, frames, dt, params, start, stop, np.bool_(first), **static
         )
+        if first:  # the state after the first evaluation; a repeat starts from its carry
+            initial, first = started, False
         state, lost, _, step = carry
-        if not bool(overflowed(lost)):
-            return carry, frames
+        if not bool(lost_any):
+            return carry, frames, initial
         stuck = stuck + 1 if int(step) == before else 0
         if stuck >= 10:
             raise NeighborOverflowError(

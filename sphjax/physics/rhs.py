@@ -28,6 +28,7 @@ import jax.numpy as jnp
 import numpy as np
 from jax.ad_checkpoint import checkpoint_name
 
+from sphjax._host import is_traced
 from sphjax.core.neighbors import (
     NeighborSearch,
     capacity,
@@ -255,7 +256,7 @@ def build_neighbors(
     neighbors = Neighbors(
         search=search,
         pairs={},
-        overflow=jnp.asarray(False),
+        overflow=np.asarray(False),
         blocks=blocks,
         union=union,
         capacities=tuple(capacities),
@@ -340,7 +341,9 @@ def _support_radius(model) -> float:
 def _support(pair_lists: dict, position, neighbors: Neighbors, model):
     """The lists of ``neighbors.support_capacities`` compacted to the support at
     ``position`` from their skin level in ``pair_lists``, and whether one overflowed."""
-    out, flags = {}, [jnp.asarray(False)]
+    if not neighbors.support_capacities:
+        return {}, np.asarray(False)
+    out, flags = {}, []
     for key, width in neighbors.support_capacities:
         start, stop = neighbors.blocks[key[0]]
         x = position[start:stop]
@@ -391,26 +394,27 @@ def split_counts(neighbors: Neighbors) -> jax.Array:
     """The most neighbours a row of each split list has in ``neighbors.search`` now (in
     the order of ``neighbors.capacities``), then how many rows of each compacted list
     have neighbours (order of ``neighbors.member_capacities``)."""
-    if neighbors.search is None:
-        return jnp.zeros(0, jnp.int32)
-    blocks, union, idx = neighbors.blocks, neighbors.union, neighbors.search.idx
+    idx = None if neighbors.search is None else neighbors.search.idx
+    xp = jnp if is_traced(idx) else np  # numpy at an allocation: nothing to compile
+    if idx is None:
+        return np.zeros(0, np.int32)
+    blocks, union, idx = neighbors.blocks, neighbors.union, xp.asarray(idx)
 
     def inside(i, j):
         rows, cols = _local(blocks[i], union), _local(blocks[j], union)
         block = idx[rows[0] : rows[1]]
         return (block >= cols[0]) & (block < cols[1])
 
-    widths = [
-        jnp.max(jnp.sum(inside(i, j), axis=1), initial=0) for (i, j), _ in neighbors.capacities
-    ]
-    rows = [jnp.sum(jnp.any(inside(i, j), axis=1)) for (i, j), _ in neighbors.member_capacities]
-    return jnp.asarray(widths + rows, jnp.int32).reshape(-1)
+    widths = [xp.max(xp.sum(inside(i, j), axis=1), initial=0) for (i, j), _ in neighbors.capacities]
+    rows = [xp.sum(xp.any(inside(i, j), axis=1)) for (i, j), _ in neighbors.member_capacities]
+    return xp.asarray(widths + rows, np.int32).reshape(-1)
 
 
 def _counts_overflow(counts, neighbors: Neighbors):
     """Whether ``counts`` (:func:`split_counts`) exceed the capacities of ``neighbors``."""
     sizes = [w for _, w in neighbors.capacities] + [m for _, m in neighbors.member_capacities]
-    return jnp.any(counts > jnp.asarray(sizes, jnp.int32).reshape(-1))
+    xp = jnp if is_traced(counts) else np
+    return xp.any(counts > np.asarray(sizes, np.int32).reshape(-1))
 
 
 def with_reference(state: State, neighbors: Neighbors, model) -> Neighbors:
