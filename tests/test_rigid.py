@@ -86,7 +86,8 @@ def test_the_gradient_of_the_bodys_height_wrt_its_density_matches_finite_differe
         return body_bottom(trajectory.states, case)[-1]
 
     rho_b = 500.0
-    grad = float(jax.grad(height)(rho_b))
+    # compiled as one program: 12 s instead of 47 s op by op outside a jit
+    grad = float(jax.jit(jax.grad(height))(rho_b))
     step = 1.0
     fd = (float(height(rho_b + step)) - float(height(rho_b - step))) / (2 * step)
     assert grad < 0  # a denser body sinks faster
