@@ -119,14 +119,34 @@ def _install_hook() -> bool:
     return True
 
 
+def _derivative_levels(x) -> int:
+    """How many differentiations (JVP or linearisation traces) ``x`` is traced by."""
+    levels = 0
+    while isinstance(x, jax.core.Tracer):
+        levels += type(x).__name__ in _HIGHER_ORDER_TRACERS
+        x = getattr(x, "primal", getattr(x, "val", None))
+    return levels
+
+
+def refuse_second_order(*trees):
+    """The error of :func:`_refuse_second_order` for arguments of a whole run, checked
+    before the run is compiled (inside a ``jit`` the nesting is no longer visible)."""
+    if any(_derivative_levels(x) > 1 for x in jax.tree_util.tree_leaves(trees)):
+        _raise_second_order()
+
+
 def _refuse_second_order(primals):
     if any(type(x).__name__ in _HIGHER_ORDER_TRACERS for x in jax.tree_util.tree_leaves(primals)):
-        raise NotImplementedError(
-            "second derivatives (e.g. jax.hessian, jvp of grad) through sphjax's custom "
-            "adjoint of the pair sums are not available; build the case with "
-            "Model(pair_adjoint=False), e.g. "
-            "case.replace(model=case.model.replace(pair_adjoint=False))"
-        )
+        _raise_second_order()
+
+
+def _raise_second_order():
+    raise NotImplementedError(
+        "second derivatives (e.g. jax.hessian, jvp of grad) through sphjax's custom "
+        "adjoint of the pair sums are not available; build the case with "
+        "Model(pair_adjoint=False), e.g. "
+        "case.replace(model=case.model.replace(pair_adjoint=False))"
+    )
 
 
 def custom_adjoint(fun: Callable, adjoint: Callable, n_linear: int) -> Callable:

@@ -505,3 +505,31 @@ def test_custom_adjoint_falls_back_to_autodiff_on_an_untested_jax(monkeypatch):
         assert float(jax.grad(plain)(0.3)) == pytest.approx(np.cos(0.3))
     finally:
         _linear_call.hook_installed.cache_clear()
+
+
+def test_grad_of_simulate_without_jit_runs_as_one_compiled_program():
+    """``jax.grad(loss)(p)`` with no ``jit`` around it compiles the run as one program
+    rather than differentiating it operation by operation (265 programs compiled for this
+    loss before, one per operation and shape; now the run's own program and the set-up's
+    and the loss's few operations), and gives the jitted gradient."""
+    from jax import monitoring
+
+    compiled = [0]
+
+    def count(event, duration, **kwargs):
+        compiled[0] += event == "/jax/core/compile/jaxpr_to_mlir_module_duration"
+
+    monitoring.register_event_duration_secs_listener(count)
+    case = sphjax.cases.taylor_green(n=8)
+
+    def loss(nu):
+        params = case.params.replace(kinematic_viscosity=nu)
+        return kinetic_energy(sphjax.simulate(case, params, n_steps=4, checkpoint_every=2).final)
+
+    nu0 = case.params.kinematic_viscosity
+    try:
+        eager = float(jax.grad(loss)(nu0))
+    finally:
+        monitoring.unregister_event_duration_listener(count)
+    assert compiled[0] <= 100, compiled[0]
+    assert eager == pytest.approx(float(jax.jit(jax.grad(loss))(nu0)), rel=1e-10)

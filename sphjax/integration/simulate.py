@@ -26,6 +26,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from sphjax._host import device_array, inside_trace
+from sphjax._linear_call import refuse_second_order
 from sphjax._text import show
 from sphjax.core import ordering
 from sphjax.core.case import Case
@@ -517,7 +518,14 @@ def simulate(
     if not all(system.current_configuration for system in model.systems):
         neighbors = _with_reference(state, neighbors, model)
     if traced:
-        run = functools.partial(_simulate_traced, checkpoint_every=checkpoint_every, order=order)
+        if model.pair_adjoint:
+            refuse_second_order(params, state, dt)
+        run = functools.partial(
+            _simulate_compiled,
+            checkpoint_every=checkpoint_every,
+            order=None if order is None else tuple(int(i) for i in order),
+            max_stored=MAX_STORED_CHUNKS,
+        )
     else:
         run = functools.partial(
             _simulate_in_chunks,
@@ -543,6 +551,32 @@ def _in_user_order(on_frames, back, states, times):
 def _initial_carry(state, neighbors):
     """``(state, neighbors, failure, step)``: no failure recorded (-1, -1), step 0."""
     return state, neighbors, np.full(2, -1, np.int32), np.zeros((), np.int32)
+
+
+@functools.partial(
+    jax.jit, static_argnames=("model", "segments", "checkpoint_every", "order", "max_stored")
+)
+def _simulate_compiled(
+    state, neighbors, dt, params, model, *, segments, checkpoint_every, order, max_stored
+):
+    """:func:`_simulate_traced` as one program.  Under an outer transformation without a
+    ``jit`` (``jax.grad(loss)(p)``) the run would otherwise be differentiated and executed
+    operation by operation, about twice as slow; inside an outer ``jit`` it is inlined.
+    ``order`` (a tuple) maps the run's particles to the user's for error messages;
+    ``max_stored`` is :data:`MAX_STORED_CHUNKS` when called, read by the trace, a part of
+    the cache key."""
+    del max_stored
+    order = None if order is None else np.asarray(order)
+    return _simulate_traced(
+        state,
+        neighbors,
+        dt,
+        params,
+        model,
+        segments=segments,
+        checkpoint_every=checkpoint_every,
+        order=order,
+    )
 
 
 def _simulate_traced(state, neighbors, dt, params, model, *, segments, checkpoint_every, order):
