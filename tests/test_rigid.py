@@ -195,3 +195,23 @@ def test_bodies_that_sink_or_float_are_refused_by_the_other_case():
         sphjax.WallContact(frequency=100.0, distance=0.5)
     with pytest.raises(ValueError, match=r"^RigidSystem.wall_contact must be WallContact"):
         sphjax.RigidSystem(wall_contact=100.0)
+
+
+def test_the_body_and_the_walls_get_neighbour_lists_only_with_wall_contact():
+    """The rigid-wall interaction is active only for a body with ``wall_contact``: the
+    floating body (none) forms no body-wall list either way, the sinking body both."""
+    from sphjax.physics.rhs import neighbor_pairs
+
+    def body_wall_pairs(case):
+        names = [type(s).__name__ for s in case.model.systems]
+        return {
+            (names[i], names[j])
+            for i, j in neighbor_pairs(case.model)
+            if {names[i], names[j]} == {"RigidSystem", "WallSystem"}
+        }
+
+    assert body_wall_pairs(floating_body(n=4)) == set()
+    assert body_wall_pairs(sinking_body(n=4)) == {
+        ("RigidSystem", "WallSystem"),
+        ("WallSystem", "RigidSystem"),
+    }

@@ -348,10 +348,12 @@ def solid_fluid(solid_system: SolidSystem, solid, system: FluidSystem, fluid, pa
 
 def rigid_wall(system: RigidSystem, body, wall_system: WallSystem, wall, pairs, ctx):
     """Rigid-wall contact: the spring-dashpot force of ``system.wall_contact`` per unit
-    mass of the body's particles (:class:`~sphjax.WallContact`); none without it."""
-    if system.wall_contact is None:
-        return {"a": jnp.zeros_like(body["x"])}
+    mass of the body's particles (:class:`~sphjax.WallContact`); active (its neighbour
+    lists formed) only for a body with one."""
     return {"a": system.wall_contact.acceleration(body, wall, pairs, ctx)}
+
+
+rigid_wall.active = lambda system, wall_system: system.wall_contact is not None
 
 
 #: (row system type, neighbour system type) -> interaction function

@@ -83,14 +83,26 @@ def neighbor_pairs(model) -> tuple[tuple[int, int], ...]:
     """Ordered pairs ``(i, j)`` of systems whose neighbour list is needed: those of an
     interaction or an update stage, and their transposes (the list of ``j`` against
     ``i`` is what the adjoint of a sum over ``i`` against ``j`` runs over)."""
-    wanted = set(INTERACTIONS) | UPDATE_PAIRS
-    wanted |= {(b, a) for a, b in wanted}
     return tuple(
         (i, j)
         for i, a in enumerate(model.systems)
         for j, b in enumerate(model.systems)
-        if (type(a), type(b)) in wanted
+        if _acts(a, b) or _acts(b, a)
     )
+
+
+def _acts(system, other) -> bool:
+    """Whether ``system`` needs a neighbour list against ``other``: an update pair, or a
+    registered interaction that is active for these two (an interaction function may
+    carry ``active(system, other)``, e.g. wall contact only where the body has one)."""
+    if (type(system), type(other)) in UPDATE_PAIRS:
+        return True
+    interaction = INTERACTIONS.get((type(system), type(other)))
+    return interaction is not None and getattr(interaction, "active", _always)(system, other)
+
+
+def _always(system, other) -> bool:
+    return True
 
 
 # ---------------------------------------------------------------------------- neighbours
