@@ -456,6 +456,21 @@ def test_the_base_files_are_valid(tmp_path):
     assert from_toml(_write(tmp_path, "b.toml", SOLID)).info["n_solid"] == 40
     body = from_toml(_write(tmp_path, "c.toml", BASE + RIGID))
     assert body.info["n_rigid"] == 4 and body.info["n_fluid"] == 36 - 4  # cut out
+    assert body.model.systems[-1].wall_contact is None
+
+
+def test_a_rigid_contact_table_gives_the_body_wall_contact(tmp_path):
+    """``[rigid.contact]`` is ``RigidSystem(wall_contact=WallContact(...))``, its
+    defaults WallContact's, and with it the body and the walls get neighbour lists."""
+    from sphjax.physics.rhs import neighbor_pairs
+
+    text = BASE + RIGID + "[rigid.contact]\nfrequency = 800.0\nfriction = 0.2\n"
+    body = from_toml(_write(tmp_path, "contact.toml", text))
+    assert body.model.systems[-1].wall_contact == sphjax.WallContact(800.0, friction=0.2)
+    types = [type(s).__name__ for s in body.model.systems]
+    pairs = {(types[i], types[j]) for i, j in neighbor_pairs(body.model)}
+    assert ("RigidSystem", "WallSystem") in pairs
+    assert body.dt <= sphjax.WallContact(800.0).time_step_limit()
     assert isinstance(body.model.systems[-1], sphjax.RigidSystem)
 
 
@@ -592,6 +607,18 @@ BAD_FILES = [
         "rigid.slip: unknown value 'sticky'; choose one of no_slip, free_slip",
     ),
     (BASE + _edit("density = 500.0", "", RIGID), "rigid.density: missing; add it"),
+    (
+        BASE + RIGID + "[rigid.contact]\ndamping_ratio = 1.0\n",
+        "rigid.contact.frequency: missing; add it (omega in rad/s)",
+    ),
+    (
+        BASE + RIGID + "[rigid.contact]\nfrequency = 800.0\ndistance = 0.5\n",
+        "rigid.contact.distance: must be >= 1 (particle spacings), got 0.5",
+    ),
+    (
+        BASE + RIGID + "[rigid.contact]\nfrequency = 800.0\nfrictoin = 0.1\n",
+        "rigid.contact.frictoin: unknown key; did you mean 'friction'?",
+    ),
     (
         BASE + _edit("[0.1, 0.2]", "[0.1, -0.1]", RIGID),
         "rigid.shapes: 4 of their particles lie in the walls (e.g. at 0.125, -0.075)",

@@ -50,6 +50,7 @@ from sphjax.physics.fluid.density_diffusion import MolteniColagrossi
 from sphjax.physics.fluid.eos import LinearEOS, TaitEOS
 from sphjax.physics.fluid.system import FluidSystem
 from sphjax.physics.fluid.viscosity import ArtificialViscosity, MorrisViscosity
+from sphjax.physics.rigid.contact import WallContact
 from sphjax.physics.rigid.system import RigidSystem
 from sphjax.physics.solid.boundary import SolidBoundary
 from sphjax.physics.solid.penalty import PenaltyForce
@@ -433,8 +434,23 @@ def _rigid(table, dim, folder, coupled: bool) -> dict:
         )
     r["slip"] = r["slip"] or "no_slip"
     r["shapes"] = _shapes(t, "shapes", dim, folder)
+    t.known.append("contact")
+    r["contact"] = _wall_contact(t) if "contact" in table else None
     t.done()
     return r
+
+
+def _wall_contact(rigid: _Table) -> WallContact:
+    """``[rigid.contact]``: the body's contact with the walls (:class:`WallContact`)."""
+    t = _Table(rigid.table["contact"], rigid.key("contact"))
+    frequency = t.get("frequency", "number", positive=True, hint=" (omega in rad/s)")
+    damping_ratio = t.get("damping_ratio", "number", 1.0, non_negative=True)
+    distance = t.get("distance", "number", 1.5)
+    if not distance >= 1.0:
+        raise SetupError(t.key("distance"), f"must be >= 1 (particle spacings), got {distance!r}")
+    friction = t.get("friction", "number", 0.5, non_negative=True)
+    t.done()
+    return WallContact(frequency, damping_ratio, distance, friction)
 
 
 def _substeps(t: _Table):
@@ -713,7 +729,8 @@ def build_setup(s: dict) -> Case:
             penalty_alpha=solid["penalty_alpha"] or 0.0,
         )
     if rigid is not None:
-        systems.append(RigidSystem(SolidBoundary(no_slip=rigid["slip"] == "no_slip")))
+        boundary = SolidBoundary(no_slip=rigid["slip"] == "no_slip")
+        systems.append(RigidSystem(boundary, wall_contact=rigid["contact"]))
         values.update(solid_density=rigid["density"])
     params = make_params(dim, gravity=tuple(gravity), **values)
     domain = _model_domain(s, x, dx, gravity)
