@@ -96,6 +96,30 @@ def test_toml_dam_break_is_the_built_in_one(tmp_path):
     )
 
 
+def test_example_lid_driven_cavity_is_the_built_in_one():
+    """examples/lid_driven_cavity.toml (a moving-wall lid listed before the box) builds
+    the built-in cavity at n = 20: the same particles (in another order), velocities
+    (the lid's rows at U, corners included), model, parameters and step."""
+    ours = from_toml(EXAMPLES / "lid_driven_cavity.toml")
+    theirs = sphjax.cases.lid_driven_cavity(n=20)
+
+    def sorted_fields(case):
+        s = case.state
+        x = np.asarray(s.position)
+        order = np.lexsort((x[:, 1], x[:, 0], np.asarray(s.kind)))
+        fields = ("position", "velocity", "density", "mass", "kind")
+        return {f: np.asarray(getattr(s, f))[order] for f in fields}
+
+    a, b = sorted_fields(ours), sorted_fields(theirs)
+    for field in a:
+        assert a[field].shape == b[field].shape and np.allclose(a[field], b[field]), field
+    assert np.sum(a["velocity"][:, 0] == 1.0) == len(theirs.info["lid_indices"])
+    assert ours.model == theirs.model
+    for (name, x), (_, y) in zip(ours.params.items(), theirs.params.items(), strict=True):
+        assert np.array_equal(np.asarray(x), np.asarray(y)), name
+    assert ours.dt == theirs.dt
+
+
 def test_example_cantilever_falls_freely_at_first(tmp_path):
     # early on (t << the bending period, ~0.9 s) the free end falls as g t^2 / 2
     out = tmp_path / "beam.h5"
@@ -607,6 +631,15 @@ BAD_FILES = [
         "rigid.slip: unknown value 'sticky'; choose one of no_slip, free_slip",
     ),
     (BASE + _edit("density = 500.0", "", RIGID), "rigid.density: missing; add it"),
+    (
+        _edit(
+            "[walls]\n",
+            '[walls]\nslip = "free_slip"\n',
+            _edit("open_top", "velocity = [1.0, 0.0]\nopen_top"),
+        ),
+        "walls.shapes[0].velocity: acts through the no-slip condition only; remove it or "
+        "set walls.slip = 'no_slip'",
+    ),
     (
         BASE + RIGID + "[rigid.contact]\ndamping_ratio = 1.0\n",
         "rigid.contact.frequency: missing; add it (omega in rad/s)",

@@ -48,6 +48,7 @@ from sphjax.physics.boundary.wall import AdamiBoundary
 from sphjax.physics.fluid.density import ContinuityDensity, SummationDensity
 from sphjax.physics.fluid.density_diffusion import MolteniColagrossi
 from sphjax.physics.fluid.eos import LinearEOS, TaitEOS
+from sphjax.physics.fluid.momentum import TransportVelocity
 from sphjax.physics.fluid.system import FluidSystem
 from sphjax.physics.fluid.viscosity import ArtificialViscosity, MorrisViscosity
 from sphjax.physics.rigid.contact import WallContact
@@ -345,6 +346,7 @@ def _fluid(table, dim, folder) -> dict:
         background_pressure=t.get("background_pressure", "number", 0.0),
         velocity=t.get("velocity", "vector", (0.0,) * dim, length=dim),
         hydrostatic=t.get("hydrostatic", "bool", False),
+        transport_velocity=t.get("transport_velocity", "bool", False),
     )
     if "gamma" in t.table and f["equation_of_state"] == "linear":
         raise SetupError("fluid.gamma", "applies to the Tait equation of state only; remove it")
@@ -377,7 +379,13 @@ def _walls(table, dim, folder) -> dict:
             raise SetupError(
                 shape_table.key("open_top"), f"applies to side = 'outside' walls, not '{side}'"
             )
-        return dict(side=side, layers=layers, open_top=open_top)
+        velocity = shape_table.get("velocity", "vector", (0.0,) * dim, length=dim)
+        if any(velocity) and w["slip"] != "no_slip":
+            raise SetupError(
+                shape_table.key("velocity"),
+                "acts through the no-slip condition only; remove it or set walls.slip = 'no_slip'",
+            )
+        return dict(side=side, layers=layers, open_top=open_top, velocity=velocity)
 
     w["shapes"] = _shapes(t, "shapes", dim, folder, options)
     t.done()
@@ -584,7 +592,7 @@ def build_setup(s: dict) -> Case:
                     raise SetupError(key, str(err)) from None
             if opts["side"] != "outside":
                 obstacles.append(shape)
-            wall_blocks.append((x, opts["side"]))
+            wall_blocks.append((x, opts))
     solid, rigid = s["solid"], s["rigid"]
     if solid is not None:  # a solid in a fluid displaces it
         obstacles += [shape for shape, _ in solid["shapes"] + solid["clamps"]]
@@ -597,7 +605,8 @@ def build_setup(s: dict) -> Case:
         blocked = np.zeros(len(x_fluid), bool)
         for shape in obstacles:
             blocked |= shape.contains(x_fluid)
-        outside_walls = x_wall[np.array([wall_blocks[t][1] == "outside" for t in wall_tag], bool)]
+        outside = [wall_blocks[t][1]["side"] == "outside" for t in wall_tag]
+        outside_walls = x_wall[np.array(outside, bool)]
         clash = _members(_keys(x_fluid, dx, origin), _keys(outside_walls, dx, origin))
         if np.any(clash & ~blocked):
             i = int(fluid_tag[np.flatnonzero(clash & ~blocked)[0]])
@@ -676,6 +685,8 @@ def build_setup(s: dict) -> Case:
         if fluid["hydrostatic"]:
             tops = np.array([top for _, top in tags])
             depth[: len(x_fluid)] = tops - x_fluid @ up
+    if len(x_wall):  # walls stay in place; the velocity is their surface's (no-slip)
+        velocity[kind == Kind.WALL] = [wall_blocks[t][1]["velocity"] for t in wall_tag]
     if solid is not None:
         velocity[kind == Kind.SOLID] = solid["velocity"]
     if rigid is not None:
@@ -700,6 +711,7 @@ def build_setup(s: dict) -> Case:
                 else SummationDensity(),
                 viscosity=viscosity,
                 density_diffusion=MolteniColagrossi() if diffusion else None,
+                transport_velocity=TransportVelocity() if fluid["transport_velocity"] else None,
             )
         )
         values.update(
