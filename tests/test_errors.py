@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import os
 
+import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
@@ -189,6 +190,21 @@ def test_particle_leaving_a_closed_domain_stops_the_run_and_keeps_frames(tmp_pat
     assert not meta["complete"] and "SimulationError" in meta["error"]
     assert np.all(np.isfinite(np.asarray(trajectory.states.position)))
     assert float(trajectory.states.position[-1, particle, 1]) <= top
+
+
+def test_an_unstable_run_under_grad_without_jit_raises_the_simulation_error():
+    """``jax.grad(loss)(p)`` with no ``jit`` runs the simulation when ``simulate`` is
+    called, compiled: its instability is the SimulationError itself (step and particle),
+    not the runtime's wrapper around the check that raised it."""
+    case = sphjax.cases.get("dam_break", n=4)
+
+    def loss(alpha):
+        params = case.params.replace(artificial_alpha=alpha)
+        final = sphjax.simulate(case, params, dt=30 * case.dt, n_steps=40).final
+        return final.position.sum()
+
+    with pytest.raises(sphjax.SimulationError, match=r"unstable at step \d+ .* particle \d+"):
+        jax.grad(loss)(case.params.artificial_alpha)
 
 
 def test_time_step_forced_past_the_check_blows_up(monkeypatch, tmp_path):

@@ -18,6 +18,7 @@ import contextlib
 import functools
 import math
 import operator
+import types
 import warnings
 from collections.abc import Callable
 
@@ -383,6 +384,26 @@ def _failure_reason(state: State, model: Model, row: int) -> str:
     return f"left the domain {where}, {' and '.join(sides)} ({hint})"
 
 
+#: the error a traced run's check raised last, so that a run executed when ``simulate``
+#: is called (under ``jax.grad`` with no ``jit`` around it) raises that error rather than
+#: the runtime's wrapper around it (the checks run on the runtime's callback thread)
+_raised = types.SimpleNamespace(error=None)
+
+
+def _raising_what_the_run_raised(run, *args):
+    """``run(*args)`` (the compiled traced run); if it executes now and one of its checks
+    raises, raise that SimulationError or NeighborOverflowError itself."""
+    *args, segments = args
+    _raised.error = None
+    try:
+        return run(*args, segments=segments)
+    except jax.errors.JaxRuntimeError:
+        error, _raised.error = _raised.error, None
+        if error is None:
+            raise
+        raise error from None
+
+
 def _raise_failure(failure, dt, order=None, state=None, model=None):
     """Raise the SimulationError of a recorded ``failure = (step, particle)``; with the
     failing ``state`` and ``model`` (concrete runs) it says what went wrong and where,
@@ -395,22 +416,24 @@ def _raise_failure(failure, dt, order=None, state=None, model=None):
             reason = "has a non-finite position/velocity or left the domain"
         else:
             reason = _failure_reason(state, model, row)
-        raise SimulationError(
+        _raised.error = SimulationError(
             f"simulation went unstable at step {step} (t = {time:.6g}): particle "
             f"{particle} {reason}",
             step=step,
             particle=particle,
             time=time,
         )
+        raise _raised.error
 
 
 def _raise_overflow(overflow):
     if bool(overflow):
-        raise NeighborOverflowError(
+        _raised.error = NeighborOverflowError(
             f"{NeighborOverflowError.MARK} inside a traced (jit/grad/vmap) simulation, where it "
             "cannot be re-allocated; raise Model.neighbor_capacity (e.g. "
             "case.replace(model=case.model.replace(neighbor_capacity=2.0)))"
         )
+        raise _raised.error
 
 
 def simulate(
@@ -534,7 +557,10 @@ def simulate(
             steps_per_chunk=steps_per_chunk,
             order=order,
         )
-    states = run(state, neighbors, dt, params, model, segments=segments)
+    if traced:
+        states = _raising_what_the_run_raised(run, state, neighbors, dt, params, model, segments)
+    else:
+        states = run(state, neighbors, dt, params, model, segments=segments)
     if order is not None:
         states = ordering.permute(states, back, axis=1)
     steps = np.concatenate(
