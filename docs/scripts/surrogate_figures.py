@@ -60,8 +60,9 @@ SMALL_OVERRIDES = {
 ROLLOUT, SMALL_ROLLOUT = 100, 14
 HISTORY = 5
 # optimiser steps per model (one-step and push-forward) for the published figures; the
-# push-forward step costs about twice the one-step one (measured 0.5 s and 1.0 s on the
-# shared 2-core machine at 1024 particles, latent 32, three message-passing steps)
+# push-forward step costs more than the one-step one (at 1024 particles, latent 32, three
+# message-passing steps on the shared 2-core machine: 0.13 s and 0.18 s with the other heavy
+# jobs held back, 0.5 s and 1.0 s under heavy load)
 TRAIN_STEPS = 600
 
 
