@@ -7,9 +7,10 @@ The budget is a number of optimiser steps per model (``--train-steps``, default
 :data:`TRAIN_STEPS`), not wall-clock time, so a rerun trains the same models on any
 machine; ``--seconds`` caps the wall-clock time in addition.  ``--stages`` runs a part
 (``gns``: steps 1-3 and 5, the same as ``dataset train metrics``; ``sil``: step 4), and
-``--models`` the networks trained and scored.  The pieces resume: the dataset, each trained
-network (``WORK/models/NAME.eqx``, its training record beside it) and each network's
-metrics (``WORK/metrics/NAME.json``) are kept in ``--work`` and not redone, so the run can
+``--models`` the networks trained (the metrics score every network trained in ``--work``).
+The pieces resume: the dataset, each trained network (``WORK/models/NAME.eqx``, its
+training record beside it) and each network's metrics (``WORK/metrics/NAME.json``, removed
+when the network is trained again) are kept in ``--work`` and not redone, so the run can
 be made piece by piece, e.g. ``--stages dataset``, ``--stages train --models gns``,
 ``--stages train --models gns_pushforward``, ``--stages metrics``.
 
@@ -17,7 +18,7 @@ be made piece by piece, e.g. ``--stages dataset``, ``--stages train --models gns
    (:data:`DATASET_COMMAND`; the tests check the two agree), trajectories long enough for
    100-step rollouts;
 2. a graph network simulator trained one-step and one trained with push-forward, the same
-   wall-clock budget each;
+   budget each;
 3. rollout metrics over 100 steps on the test split (LagrangeBench's and ours) for both
    and the constant-velocity baseline -> ``docs/figures/tg_metrics.json``; plots
    ``tg_rollout.png`` and ``tg_rollout_mse.png``;
@@ -133,6 +134,7 @@ def train_models(sim, train_set, valid_set, names, n_steps: int, seconds, small:
             pushforward_weights=weights,
         )
         sim.save(result.model, cache / f"{name}.eqx", overwrite=True)
+        (cache.parent / "metrics" / f"{name}.json").unlink(missing_ok=True)  # stale scores
         info = dict(
             steps=result.steps,
             seconds=result.seconds,
@@ -240,7 +242,11 @@ def main(argv=None) -> dict:
         help="parts to run (gns = dataset train metrics)",
     )
     p.add_argument(
-        "--models", nargs="+", default=list(MODELS), choices=list(MODELS), help="networks"
+        "--models",
+        nargs="+",
+        default=list(MODELS),
+        choices=list(MODELS),
+        help="networks to train (the metrics score every one trained in --work)",
     )
     p.add_argument("--small", action="store_true", help="a run of minutes (checks the script)")
     p.add_argument("--write-docs", action="store_true", help="write into docs/figures")
