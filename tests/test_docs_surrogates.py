@@ -107,4 +107,6 @@ def test_the_shipped_model_was_trained_on_the_documented_dataset():
     vary = {name: tuple(r) for name, r in doc["varied_params"].items()}
     case = sphjax.cases.get(doc["case"], **doc["case_kwargs"])
     dt = ensemble_time_step(case, Perturbation(**perturbation), vary, doc["case_kwargs"])
-    assert sim.metadata["dt"] == pytest.approx(dt, rel=1e-9)
+    # (the command runs in float32, the tests in float64: the case's speeds differ by
+    # rounding)
+    assert sim.metadata["dt"] == pytest.approx(dt, rel=1e-6)
