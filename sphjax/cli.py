@@ -387,7 +387,13 @@ def _add_dataset(sub) -> None:
         action="store_true",
         help="keep the case's own seed (e.g. the Taylor-Green disorder) for every trajectory",
     )
-    p.add_argument("--dt", type=_positive_float, default=None, help="solver step (default: stable)")
+    p.add_argument(
+        "--dt",
+        type=_positive_float,
+        default=None,
+        help="solver step (default: the stable step of the fastest start the perturbation "
+        "and --vary ranges allow, the same for every --seed)",
+    )
     p.add_argument(
         "--batch-size",
         type=_positive_int,

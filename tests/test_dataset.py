@@ -260,6 +260,79 @@ def test_seed_draws_the_case_disorder_per_trajectory():
         initial_conditions(case, (1, 0, 0), p, {}, 1, {"n": 9})
 
 
+def test_every_seed_writes_the_same_dt(tmp_path):
+    """The ensemble's step comes from the case and the ranges, not from the draws: the same
+    arguments with two seeds write the same ``dt`` (the draws, and so their own stable
+    steps, differ)."""
+    import sphjax
+    from sphjax.dataset import Perturbation, ensemble_time_step, generate_dataset
+
+    case = sphjax.cases.taylor_green(n=8)
+    p = Perturbation((0.8, 1.2), 0.3, 2)
+    vary = {"kinematic_viscosity": (0.008, 0.012)}
+    dts = []
+    for seed in (1, 2):
+        out = generate_dataset(
+            case,
+            tmp_path / f"seed{seed}",
+            n_train=1,
+            n_valid=0,
+            n_test=0,
+            steps=2,
+            write_every=1,
+            vary=vary,
+            perturbation=p,
+            seed=seed,
+            progress=False,
+            case_kwargs={"n": 8},
+        )
+        dts.append(json.loads((out / "metadata.json").read_text())["dt"])
+    assert dts[0] == dts[1] == ensemble_time_step(case, p, vary, {"n": 8})
+    # an explicit dt still overrides the rule
+    out = generate_dataset(
+        case,
+        tmp_path / "given",
+        n_train=1,
+        n_valid=0,
+        n_test=0,
+        steps=2,
+        write_every=1,
+        vary=vary,
+        perturbation=p,
+        seed=1,
+        dt=0.5 * dts[0],
+        progress=False,
+        case_kwargs={"n": 8},
+    )
+    assert json.loads((out / "metadata.json").read_text())["dt"] == 0.5 * dts[0]
+
+
+@pytest.mark.parametrize("which", ["taylor_green", "taylor_green_same_seed", "dam_break"])
+def test_ensemble_time_step_bounds_every_draw(which):
+    """The rule's step is at most the stable step of every drawn trajectory (no simulation;
+    a Taylor-Green ensemble whose case seed is redrawn, one on the case's own start, and a
+    dam break at rest, where the random field sets the speed)."""
+    import sphjax
+    from sphjax.dataset import Perturbation, ensemble_time_step, initial_conditions
+    from sphjax.integration.timestep import stable_time_step
+
+    if which == "dam_break":
+        case, kwargs = sphjax.cases.dam_break(n=4), {"n": 4}
+        p = Perturbation((1.0, 1.0), 0.5, 2, jitter=0.1)
+        vary = {"artificial_alpha": (0.01, 0.1), "sound_speed": (40.0, 60.0)}
+    else:
+        case, kwargs = sphjax.cases.taylor_green(n=8), {"n": 8}
+        p = Perturbation((0.8, 1.2), 0.3, 2, case_seed=which == "taylor_green")
+        vary = {"kinematic_viscosity": (0.008, 0.012), "sound_speed": (8.0, 12.0)}
+    dt = ensemble_time_step(case, p, vary, kwargs)
+    for seed in (0, 1):
+        jobs = initial_conditions(case, (6, 1, 1), p, vary, seed, kwargs)
+        steps = [stable_time_step(s, case.model, q) for _, _, s, q in jobs]
+        assert dt <= min(steps)
+    # the corner with the largest sound speed sets it: the rule is not the case's own step
+    assert dt < stable_time_step(case.state, case.model, case.params)
+
+
 def test_dam_break_dataset_walls_and_free_surface(tmp_path):
     """A 2D dam break (walls, free surface): closed box, wall particles of type 1 that do
     not move, the column falling under gravity; the loader reads it (~15 s)."""

@@ -6,13 +6,19 @@
 The budget is a number of optimiser steps per model (``--train-steps``, default
 :data:`TRAIN_STEPS`), not wall-clock time, so a rerun trains the same models on any
 machine; ``--seconds`` caps the wall-clock time in addition.  ``--stages`` runs a part
-(``gns``: steps 1-3 and 5; ``sil``: step 4).
+(``gns``: steps 1-3 and 5, the same as ``dataset train metrics``; ``sil``: step 4), and
+``--models`` the networks trained (the metrics score every network trained in ``--work``).
+The pieces resume: the dataset, each trained network (``WORK/models/NAME.eqx``, its
+training record beside it) and each network's metrics (``WORK/metrics/NAME.json``, removed
+when the network is trained again) are kept in ``--work`` and not redone, so the run can
+be made piece by piece, e.g. ``--stages dataset``, ``--stages train --models gns``,
+``--stages train --models gns_pushforward``, ``--stages metrics``.
 
 1. the Taylor-Green dataset with exactly the command printed in docs/surrogates.md
    (:data:`DATASET_COMMAND`; the tests check the two agree), trajectories long enough for
    100-step rollouts;
 2. a graph network simulator trained one-step and one trained with push-forward, the same
-   wall-clock budget each;
+   budget each;
 3. rollout metrics over 100 steps on the test split (LagrangeBench's and ours) for both
    and the constant-velocity baseline -> ``docs/figures/tg_metrics.json``; plots
    ``tg_rollout.png`` and ``tg_rollout_mse.png``;
@@ -55,8 +61,9 @@ SMALL_OVERRIDES = {
 ROLLOUT, SMALL_ROLLOUT = 100, 14
 HISTORY = 5
 # optimiser steps per model (one-step and push-forward) for the published figures; the
-# push-forward step costs about twice the one-step one (measured 0.5 s and 1.0 s on the
-# shared 2-core machine at 1024 particles, latent 32, three message-passing steps)
+# push-forward step costs more than the one-step one (at 1024 particles, latent 32, three
+# message-passing steps on the shared 2-core machine: 0.13 s and 0.18 s with the other heavy
+# jobs held back, 0.5 s and 1.0 s under heavy load)
 TRAIN_STEPS = 600
 
 
@@ -81,8 +88,12 @@ def make_dataset(folder: Path, small: bool) -> None:
         raise SystemExit(f"dataset command failed: sphjax {shlex.join(argv)}")
 
 
-def train_models(train_set, valid_set, n_steps: int, seconds, small: bool):
-    from sphjax.surrogate import LearnedSimulator, SimulatorConfig, train
+#: the networks: name -> (push-forward unrolls, their weights)
+MODELS = {"gns": ((0,), None), "gns_pushforward": ((0, 1, 3), (6, 2, 1))}
+
+
+def make_simulator(train_set, small: bool):
+    from sphjax.surrogate import LearnedSimulator, SimulatorConfig
 
     config = SimulatorConfig(
         history=HISTORY,
@@ -90,12 +101,22 @@ def train_models(train_set, valid_set, n_steps: int, seconds, small: bool):
         hidden=16 if small else 32,
         message_steps=2 if small else 3,
     )
-    sim = LearnedSimulator(train_set.metadata, config)
-    runs = {}
-    for name, pushforward, weights in [
-        ("gns", (0,), None),
-        ("gns_pushforward", (0, 1, 3), (6, 2, 1)),
-    ]:
+    return LearnedSimulator(train_set.metadata, config)
+
+
+def train_models(sim, train_set, valid_set, names, n_steps: int, seconds, small: bool, cache):
+    """Train the networks ``names`` (:data:`MODELS`), each saved to ``cache/NAME.eqx`` with
+    its record (steps, seconds, validation curve) in ``cache/NAME.train.json``; one found
+    there is not trained again."""
+    from sphjax.surrogate import train
+
+    cache.mkdir(parents=True, exist_ok=True)
+    for name in names:
+        record = cache / f"{name}.train.json"
+        if record.exists():
+            print(f"{name}: trained before ({record})")
+            continue
+        pushforward, weights = MODELS[name]
         result = train(
             sim,
             sim.init_model(jax.random.PRNGKey(1)),
@@ -112,9 +133,30 @@ def train_models(train_set, valid_set, n_steps: int, seconds, small: bool):
             pushforward=pushforward,
             pushforward_weights=weights,
         )
-        runs[name] = result
-        print(f"{name}: {result.steps} steps in {result.seconds:.0f} s")
-    return sim, runs
+        sim.save(result.model, cache / f"{name}.eqx", overwrite=True)
+        (cache.parent / "metrics" / f"{name}.json").unlink(missing_ok=True)  # stale scores
+        info = dict(
+            steps=result.steps,
+            seconds=result.seconds,
+            valid=result.valid,
+            budget=dict(train_steps=n_steps, seconds=seconds),
+            command=shlex.join(["python", "docs/scripts/surrogate_figures.py", *sys.argv[1:]]),
+        )
+        record.write_text(json.dumps(info, indent=1))
+        print(f"{name}: {result.steps} steps in {result.seconds:.0f} s", flush=True)
+
+
+def load_models(cache, names) -> dict:
+    """The trained networks ``names`` found in ``cache``: name -> (model, record)."""
+    from sphjax.surrogate import LearnedSimulator
+
+    out = {}
+    for name in names:
+        record = cache / f"{name}.train.json"
+        if record.exists():
+            _, model = LearnedSimulator.load(cache / f"{name}.eqx")
+            out[name] = (model, json.loads(record.read_text()))
+    return out
 
 
 def plot_mse(metrics: dict, path: Path) -> None:
@@ -193,7 +235,18 @@ def main(argv=None) -> dict:
     p.add_argument("--seconds", type=float, default=None, help="also cap each GNS training")
     p.add_argument("--sil-seconds", type=float, default=900.0, help="solver-in-the-loop budget")
     p.add_argument(
-        "--stages", nargs="+", default=["gns", "sil"], choices=["gns", "sil"], help="parts to run"
+        "--stages",
+        nargs="+",
+        default=["gns", "sil"],
+        choices=["gns", "dataset", "train", "metrics", "sil"],
+        help="parts to run (gns = dataset train metrics)",
+    )
+    p.add_argument(
+        "--models",
+        nargs="+",
+        default=list(MODELS),
+        choices=list(MODELS),
+        help="networks to train (the metrics score every one trained in --work)",
     )
     p.add_argument("--small", action="store_true", help="a run of minutes (checks the script)")
     p.add_argument("--write-docs", action="store_true", help="write into docs/figures")
@@ -210,6 +263,8 @@ def main(argv=None) -> dict:
     figures.mkdir(parents=True, exist_ok=True)
     out = {}
     if "gns" in args.stages:
+        args.stages = [*args.stages, "dataset", "train", "metrics"]
+    if {"dataset", "train", "metrics"} & set(args.stages):
         out["gns"] = gns_stage(args, work, figures)
     if "sil" in args.stages:
         sys.path.insert(0, str(HERE))
@@ -224,44 +279,76 @@ def main(argv=None) -> dict:
 
 
 def gns_stage(args, work: Path, figures: Path) -> dict:
-    """Steps 1-3 and 5: dataset, two trained GNS, rollout metrics, plots, weights."""
+    """Steps 1-3 and 5 (the parts in ``args.stages``): dataset, trained GNS, rollout
+    metrics, plots, weights."""
     from sphjax.surrogate import data, rollout_metrics
 
     folder = work / ("tg12" if args.small else "tg32")
-    t0 = time.perf_counter()
-    make_dataset(folder, args.small)
-    dataset_seconds = time.perf_counter() - t0
-    print(f"dataset: {dataset_seconds:.0f} s", flush=True)
+    timing = work / "dataset_seconds.json"
+    if "dataset" in args.stages:
+        t0 = time.perf_counter()
+        made = not (folder / "metadata.json").exists()
+        make_dataset(folder, args.small)
+        if made:
+            timing.write_text(json.dumps(time.perf_counter() - t0))
+        print(f"dataset: {time.perf_counter() - t0:.0f} s", flush=True)
+    if not {"train", "metrics"} & set(args.stages):
+        return {}
     train_set, valid_set, test_set = (data.load(folder, s) for s in ("train", "valid", "test"))
-    sim, runs = train_models(train_set, valid_set, args.train_steps, args.seconds, args.small)
+    sim = make_simulator(train_set, args.small)
+    cache = work / "models"
+    if "train" in args.stages:
+        train_models(
+            sim,
+            train_set,
+            valid_set,
+            args.models,
+            args.train_steps,
+            args.seconds,
+            args.small,
+            cache,
+        )
+    if "metrics" not in args.stages:
+        return {}
+    runs = load_models(cache, MODELS)  # every network trained in this --work
+    if "gns" not in runs:
+        raise SystemExit(f"no trained gns in {cache}: run --stages train first")
     n_steps = SMALL_ROLLOUT if args.small else ROLLOUT
-    t0 = time.perf_counter()
-    metrics = {
-        name: rollout_metrics(sim, run.model, test_set, n_steps=n_steps)
-        for name, run in runs.items()
-    }
-    metrics["constant velocity"] = rollout_metrics(sim, None, test_set, n_steps=n_steps)
-    metrics_seconds = time.perf_counter() - t0
+    scores = work / "metrics"
+    scores.mkdir(parents=True, exist_ok=True)
+    metrics, metrics_seconds = {}, {}
+    for name, model in [*((n, m) for n, (m, _) in runs.items()), ("constant velocity", None)]:
+        path = scores / f"{name.replace(' ', '_')}.json"
+        if not path.exists():
+            t0 = time.perf_counter()
+            m = rollout_metrics(sim, model, test_set, n_steps=n_steps)
+            seconds = time.perf_counter() - t0
+            path.write_text(json.dumps(dict(metrics=m, seconds=seconds), default=_plain))
+            print(f"metrics of {name}: {seconds:.0f} s", flush=True)
+        saved = json.loads(path.read_text())
+        metrics[name], metrics_seconds[name] = saved["metrics"], saved["seconds"]
+    first = next(iter(runs.values()))[1]
     out = dict(
         metrics=metrics,
         dataset=dict(
             command=shlex.join(["sphjax", *dataset_argv(folder, args.small)]),
-            seconds=dataset_seconds,
+            seconds=json.loads(timing.read_text()) if timing.exists() else None,
             metadata=train_set.metadata,
         ),
-        budget=dict(train_steps=args.train_steps, seconds=args.seconds),
+        budget=first["budget"],
         training={
-            n: dict(steps=r.steps, seconds=r.seconds, valid=r.valid) for n, r in runs.items()
+            n: dict(steps=r["steps"], seconds=r["seconds"], valid=r["valid"], command=r["command"])
+            for n, (_, r) in runs.items()
         },
         metrics_seconds=metrics_seconds,
         config=dict(sim.config.__dict__),
         command=shlex.join(["python", "docs/scripts/surrogate_figures.py", *sys.argv[1:]]),
     )
-    (figures / "tg_metrics.json").write_text(json.dumps(out, indent=1))
+    (figures / "tg_metrics.json").write_text(json.dumps(out, indent=1, default=_plain))
     plot_mse(metrics, figures / "tg_rollout_mse.png")
-    plot_rollout(sim, runs["gns"].model, test_set, figures / "tg_rollout.png", n_steps)
+    plot_rollout(sim, runs["gns"][0], test_set, figures / "tg_rollout.png", n_steps)
     if args.write_model:
-        sim.save(runs["gns"].model, DOCS / "models" / "tg32_gns.eqx", overwrite=True)
+        sim.save(runs["gns"][0], DOCS / "models" / "tg32_gns.eqx", overwrite=True)
     base = metrics["constant velocity"]
     print("| metric | " + " | ".join(metrics) + " | GNS / const. velocity |")
     print("|---|" + "---:|" * (len(metrics) + 1))
@@ -270,6 +357,12 @@ def gns_stage(args, work: Path, figures: Path) -> dict:
         row = " | ".join(f"{m[key]:.3e}" for m in metrics.values())
         print(f"| {key} | {row} | {metrics['gns'][key] / base[key]:.2f} |")
     return out
+
+
+def _plain(value):
+    """JSON for numpy and JAX numbers and arrays."""
+    array = np.asarray(value)
+    return array.item() if array.ndim == 0 else array.tolist()
 
 
 if __name__ == "__main__":

@@ -26,7 +26,13 @@ from sphjax.dataset.format import (
     particle_types,
     statistics,
 )
-from sphjax.dataset.generate import MARKER, PARTIAL, generate_dataset
+from sphjax.dataset.generate import (
+    MARKER,
+    PARTIAL,
+    RESEED_SPEED_MARGIN,
+    ensemble_time_step,
+    generate_dataset,
+)
 from sphjax.dataset.perturb import (
     SPLITS,
     Perturbation,
@@ -34,8 +40,10 @@ from sphjax.dataset.perturb import (
     initial_conditions,
     perturb_state,
     random_velocity_field,
+    redraws_case_seed,
     reseeded_case,
     sample_params,
+    speed_bound,
     trajectory_rng,
 )
 
@@ -47,12 +55,14 @@ __all__ = [
     "MOVING_WALL",
     "PAD",
     "PARTIAL",
+    "RESEED_SPEED_MARGIN",
     "SPLITS",
     "WALL",
     "Perturbation",
     "check_metadata",
     "check_same_geometry",
     "check_vary",
+    "ensemble_time_step",
     "frame_differences",
     "frame_time",
     "generate_dataset",
@@ -61,8 +71,10 @@ __all__ = [
     "particle_types",
     "perturb_state",
     "random_velocity_field",
+    "redraws_case_seed",
     "reseeded_case",
     "sample_params",
+    "speed_bound",
     "statistics",
     "trajectory_rng",
 ]

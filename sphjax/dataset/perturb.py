@@ -160,6 +160,13 @@ def _factory_takes_seed(case: Case, case_kwargs: Mapping) -> bool:
     return "seed" in inspect.signature(factory).parameters
 
 
+def redraws_case_seed(case: Case, perturbation: Perturbation, case_kwargs: Mapping) -> bool:
+    """Whether every trajectory rebuilds ``case`` with its own ``seed``
+    (:attr:`Perturbation.case_seed`, a factory that takes ``seed`` and ``case_kwargs``
+    that do not fix it)."""
+    return perturbation.case_seed and _factory_takes_seed(case, case_kwargs)
+
+
 def _same_params(a: Params, b: Params) -> bool:
     la, lb = jax.tree_util.tree_leaves(a), jax.tree_util.tree_leaves(b)
     return len(la) == len(lb) and all(
@@ -218,6 +225,21 @@ def perturb_state(
     return state
 
 
+def speed_bound(case: Case, perturbation: Perturbation) -> float:
+    """The largest fluid speed :func:`perturb_state` can give the case's initial state.
+
+    ``|s v + f U w| <= a_hi U + f U'`` for every draw: ``s <= a_hi`` (the top of
+    ``perturbation.amplitude``), ``|v| <= U`` (``U`` the case's peak fluid speed), and the
+    random field ``w`` has peak norm 1 and is scaled by ``f U'`` (``f`` =
+    ``perturbation.fourier``, ``U' = U``, or 1 m/s for a case at rest).  Jitter moves
+    particles and leaves velocities alone.
+    """
+    state = case.state
+    fluid = np.asarray(state.kind) == Kind.FLUID
+    peak = float(np.linalg.norm(np.asarray(state.velocity)[fluid], axis=1).max(initial=0.0))
+    return perturbation.amplitude[1] * peak + perturbation.fourier * (peak if peak > 0 else 1.0)
+
+
 def sample_params(
     params: Params, vary: Mapping[str, tuple[float, float]], rng: np.random.Generator
 ) -> Params:
@@ -256,7 +278,7 @@ def initial_conditions(
     case_kwargs: Mapping,
 ) -> list[tuple[str, int, State, Params]]:
     """``(split, index, state, params)`` of every trajectory of the ensemble."""
-    reseed = perturbation.case_seed and _factory_takes_seed(case, case_kwargs)
+    reseed = redraws_case_seed(case, perturbation, case_kwargs)
     jobs = []
     for split, n in zip(SPLITS, counts, strict=True):
         for i in range(n):
