@@ -3,6 +3,9 @@
 * :func:`surge_front` — the dam-break surge front ``Z`` (Martin & Moyce 1952);
 * :func:`probe_pressure` — the pressure the fluid exerts at a probe point (a wall sensor);
 * :func:`poiseuille_centreline_speed` — the channel's centre-line speed;
+* :func:`channel_profile`, :func:`channel_mass_flux` — the velocity profile and the
+  mass flux across a channel with an inflow and an outflow (against
+  :func:`poiseuille_profile`);
 * :func:`centreline_profiles` — a lid-driven cavity's centreline velocities at Ghia, Ghia
   & Shin's (1982) points;
 * :func:`tip_displacement` — the displacement of a solid's tip probe (plate, Turek-Hron);
@@ -58,6 +61,50 @@ def poiseuille_centreline_speed(state, case: Case) -> float:
     near = np.abs(y - L / 2) < 0.6 * dx
     curvature = info["body_force"] / (2 * info["viscosity"]) * (dx / 2) ** 2
     return float(np.mean(u[near])) + curvature
+
+
+def poiseuille_profile(y, height, mean_velocity):
+    """Plane Poiseuille flow of mean speed ``U``: ``u(y) = 4 u_max y (H - y) / H^2``,
+    ``u_max = 1.5 U`` (``y`` from the lower wall)."""
+    y = np.asarray(y, float)
+    return 6.0 * mean_velocity * y * (height - y) / height**2
+
+
+def _slab(states, x0, x1):
+    """Positions and velocities of the fluid particles of ``states`` (one State or a
+    Trajectory's, frames stacked) with ``x0 <= x < x1``, each frame's in one array."""
+    kind = np.asarray(states.kind).reshape(-1)
+    x = np.asarray(states.position).reshape(-1, 2)
+    v = np.asarray(states.velocity).reshape(-1, 2)
+    keep = (kind == Kind.FLUID) & (x[:, 0] >= x0) & (x[:, 0] < x1)
+    return x[keep], v[keep]
+
+
+def channel_profile(states, case: Case, x0: float, x1: float):
+    """``(y, u)``: the mean speed along the channel of the fluid particles between ``x0``
+    and ``x1``, per lattice row (bins of ``dx`` across the channel), averaged over the
+    frames of ``states`` (a State or a Trajectory's ``states``); ``y`` the bins' centres."""
+    H, dx = case.info["height"], case.info["dx"]
+    x, v = _slab(states, x0, x1)
+    rows = int(round(H / dx))
+    index = np.clip(np.floor(x[:, 1] / dx).astype(int), 0, rows - 1)
+    count = np.bincount(index, minlength=rows)
+    total = np.bincount(index, weights=v[:, 0], minlength=rows)
+    y = (np.arange(rows) + 0.5) * dx
+    return y, total / np.maximum(count, 1)
+
+
+def channel_mass_flux(states, case: Case, x0: float, x1: float) -> float:
+    """The mass flux across the channel (per unit depth) at the slab ``[x0, x1)``:
+    ``sum_a m_a u_a / (x1 - x0)`` over its fluid particles, ``= int rho u dy`` on
+    average, averaged over the frames of ``states``."""
+    frames = max(1, int(np.prod(np.asarray(states.time).shape)))
+    kind = np.asarray(states.kind).reshape(-1)
+    x = np.asarray(states.position).reshape(-1, 2)
+    m = np.asarray(states.mass).reshape(-1)
+    u = np.asarray(states.velocity).reshape(-1, 2)[:, 0]
+    keep = (kind == Kind.FLUID) & (x[:, 0] >= x0) & (x[:, 0] < x1)
+    return float(np.sum(m[keep] * u[keep]) / (x1 - x0) / frames)
 
 
 def surge_front(states, case: Case):
