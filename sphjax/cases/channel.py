@@ -29,6 +29,7 @@ def channel_flow(
     reynolds: float = 10.0,
     profile: str = "uniform",
     sound_speed_factor: float = 10.0,
+    outflow_pressure_factor: float = 0.003,
     buffer_width: float | None = None,
     density: str = "summation",
     kernel="quintic_spline",
@@ -80,9 +81,13 @@ def channel_flow(
             f"{cutoff:.6g} (rounded to {W:.6g}, a whole number of spacings): give "
             f"buffer_width >= {cutoff:.6g}"
         )
+    rho0 = 1000.0
+    u_max = 1.5 * U
+    nu = U * H / Re
+    c0 = check_positive("sound_speed_factor", sound_speed_factor) * u_max
     open_system = OpenBoundarySystem(
         Inflow(plane=0.0, width=W, velocity=U, profile=profile, bottom=0.0, height=H),
-        Outflow(plane=L, width=W),
+        Outflow(plane=L, width=W, pressure=outflow_pressure_factor * rho0 * c0**2),
     )
     open_system.check_support(cutoff)
     layers = wall_layers(cutoff, dx)
@@ -108,11 +113,8 @@ def channel_flow(
     u = np.asarray(open_system.inflow.velocity_at(x[:, 1]))
     velocity = np.zeros_like(x)
     velocity[:, 0] = np.where(flowing, u, 0.0)
-    rho0 = 1000.0
-    u_max = 1.5 * U
-    nu = U * H / Re
     params = make_params(
-        2, reference_density=rho0, sound_speed=sound_speed_factor * u_max, kinematic_viscosity=nu
+        2, reference_density=rho0, sound_speed=c0, kinematic_viscosity=nu
     )
     margin = (layers + 2) * dx
     model = Model(

@@ -16,9 +16,10 @@ Tafuni, Domínguez, Vacondio & Crespo (2018), as TrixiParticles.jl's open bounda
   this is that extrapolation averaged over the channel's cross-section, exact for a
   pressure uniform across it);
 * outflow buffer: the pressure is prescribed, ``p = 0`` (the fluid's reference; density
-  from the fluid's inverse equation of state); each particle keeps the velocity it
-  brought from the fluid, ``Du/Dt = 0`` (the convective outflow condition with the
-  particles' own velocity: a fully developed profile leaves unchanged).
+  from the fluid's inverse equation of state); each particle keeps the speed along the
+  channel it brought from the fluid, ``Du/Dt = 0``, and none across it (the convective
+  outflow condition with the particles' own velocity, for a flow that leaves fully
+  developed: its profile leaves unchanged).
 
 Both buffers' particles move with their velocity (no kick changes it).  A fluid
 particle sees them as fluid neighbours with that velocity, pressure and density: in its
@@ -127,9 +128,12 @@ class Outflow:
 
     plane: float
     width: float
+    pressure: float = 0.0
 
     def __post_init__(self):
         _positive("Outflow", "width", self.width, "give the buffer's length along x")
+        if not math.isfinite(float(self.pressure)):
+            raise ValueError(f"Outflow.pressure must be a finite number, got {self.pressure!r}")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -213,7 +217,7 @@ class OpenBoundarySystem:
         x = view["x"][:, 0]
         inflow = x < self.middle
         p_in = inflow_pressure(fluid["x"][:, 0], fluid["p"], self.inflow, x)
-        pressure = jnp.where(inflow, p_in, 0.0)
+        pressure = jnp.where(inflow, p_in, self.outflow.pressure)
         density = fluid_system.equation_of_state.density(pressure, ctx.params.fluid)
         return {**view, "p": pressure, "rho": density}
 
@@ -296,4 +300,7 @@ def recycle(state, inflow: Inflow, outflow: Outflow):
         )
     }
     moved["position"] = moved["position"].at[:, 0].add(-back)
+    # an outflow particle keeps its speed along the channel, not across it (it would
+    # drift into the walls over its stay in the buffer)
+    moved["velocity"] = moved["velocity"].at[outflow_slot, 1:].set(0.0, mode="drop")
     return state.replace(**moved)
