@@ -5,7 +5,7 @@
 * :func:`poiseuille_centreline_speed` — the channel's centre-line speed;
 * :func:`channel_profile`, :func:`channel_mass_flux` — the velocity profile and the
   mass flux across a channel with an inflow and an outflow (against
-  :func:`poiseuille_profile`);
+  :func:`poiseuille_profile` and :func:`channel_startup_profile`);
 * :func:`centreline_profiles` — a lid-driven cavity's centreline velocities at Ghia, Ghia
   & Shin's (1982) points;
 * :func:`tip_displacement` — the displacement of a solid's tip probe (plate, Turek-Hron);
@@ -68,6 +68,34 @@ def poiseuille_profile(y, height, mean_velocity):
     ``u_max = 1.5 U`` (``y`` from the lower wall)."""
     y = np.asarray(y, float)
     return 6.0 * mean_velocity * y * (height - y) / height**2
+
+
+def channel_startup_profile(y, t, height, mean_velocity, viscosity, terms: int = 40):
+    """Plane Poiseuille flow started from a plug at a constant flow rate: ``u(y, t)``
+    for ``u(y, 0) = U``, no slip at ``y = 0, H`` and ``int u dy = U H`` held by the
+    pressure gradient.  With ``eta = y - H/2``, ``u = u_P(y) + sum_j a_j phi_j(eta)
+    exp(-nu k_j^2 t)``, ``phi_j = cos(k_j eta) - cos(k_j H / 2)`` (no net flow, so the
+    pressure gradient takes the constant part), ``tan(k_j H / 2) = k_j H / 2``, and
+    ``a_j`` the projections of ``U - u_P`` on the ``phi_j`` (orthogonal: the operator is
+    symmetric on the functions of zero mean).  ``u_P``: :func:`poiseuille_profile`."""
+    from scipy.optimize import brentq
+
+    H, U, nu = float(height), float(mean_velocity), float(viscosity)
+    y = np.asarray(y, float)
+    grid = (np.arange(4000) + 0.5) / 4000 * H  # midpoint quadrature of the projections
+    initial = U - poiseuille_profile(grid, H, U)
+    u = poiseuille_profile(y, H, U)
+    for j in range(terms):
+        # the root of tan(z) = z in (j pi + pi/2 ... (j + 1) pi + pi/2), z = k H / 2
+        z = brentq(lambda z: np.sin(z) - z * np.cos(z), (j + 1) * np.pi, (j + 1.5) * np.pi - 1e-9)
+        k = 2.0 * z / H
+
+        def phi(yy, k=k):
+            return np.cos(k * (yy - H / 2)) - np.cos(k * H / 2)
+
+        a = np.sum(initial * phi(grid)) / np.sum(phi(grid) ** 2)
+        u = u + a * phi(y) * np.exp(-nu * k**2 * np.asarray(t, float))
+    return u
 
 
 def _slab(states, x0, x1):

@@ -165,6 +165,11 @@ def test_bad_input_gets_one_line_naming_the_argument():
         OpenBoundarySystem(Inflow(0.0, 1.0, 1.0), Outflow(2.0, 0.5)).check_support(0.75)
 
 
+def test_the_diffrax_route_refuses_open_boundaries():
+    with pytest.raises(ValueError, match=r"^OpenBoundarySystem: .* run in sphjax.simulate only"):
+        sphjax.diffeqsolve_case(channel_flow(n=4), t1=0.01)
+
+
 def test_parameters_the_channel_does_not_read_are_refused():
     case = channel_flow(n=4)
     with pytest.raises(sphjax.UnusedParameterError, match=r"^artificial_alpha is not used"):

@@ -54,6 +54,7 @@ from sphjax.observables import (
     centreline_profiles,
     channel_mass_flux,
     channel_profile,
+    channel_startup_profile,
     oscillation_stats,
     poiseuille_centreline_speed,
     poiseuille_profile,
@@ -159,6 +160,7 @@ __all__ = [
     "body_bottom",
     "channel_flow",
     "channel_profile",
+    "channel_startup_profile",
     "channel_mass_flux",
     "poiseuille_profile",
 ]

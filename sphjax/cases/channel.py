@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -28,6 +29,7 @@ def channel_flow(
     inflow_velocity: float = 1.0,
     reynolds: float = 10.0,
     profile: str = "uniform",
+    initial_profile: str | None = None,
     sound_speed_factor: float = 10.0,
     outflow_pressure_factor: float = 0.003,
     buffer_width: float | None = None,
@@ -41,8 +43,9 @@ def channel_flow(
     or ``"parabolic"`` profile, :class:`~sphjax.physics.open_boundary.Inflow`) and leaves
     at ``x = length``; walls at ``y = 0`` and ``y = H``.  Downstream of the entrance
     length the flow is plane Poiseuille flow, ``u(y) = 4 u_max y (H - y) / H^2`` with
-    ``u_max = 1.5 U`` (:func:`sphjax.observables.poiseuille_profile`).  Every particle
-    starts with the inflow's profile ``u_in(y)``; ``nu = U H / reynolds``,
+    ``u_max = 1.5 U`` (:func:`sphjax.observables.poiseuille_profile`).  The buffers'
+    particles start with the inflow's profile ``u_in(y)``, the fluid's with
+    ``initial_profile`` (default the inflow's); ``nu = U H / reynolds``,
     ``c0 = sound_speed_factor * u_max``, ``rho0 = 1000``.  Fluid as the Poiseuille case's:
     quintic spline, ``h = dx``, summation density (or ``density="continuity"``), Tait
     with ``gamma = 1``, Morris viscosity, Adami walls.
@@ -50,6 +53,14 @@ def channel_flow(
     Args:
       n: particles across the channel (``dx = H / n``).
       length: the channel's length between the planes, in channel heights.
+      initial_profile: the fluid's initial velocity profile, ``"uniform"`` (a plug of
+        speed ``U``: away from the ends it develops as plane Poiseuille flow started at
+        a constant flow rate, :func:`sphjax.observables.channel_startup_profile`) or
+        ``"parabolic"``; default ``profile``.
+      outflow_pressure_factor: the outflow buffer's pressure, ``factor * rho0 c0^2``;
+        the default 0.003 (a fifth of the pressure drop along a channel 2 H long at
+        Re = 10) keeps the pressure near the outflow positive, where otherwise fluid
+        particles next to the walls come within 0.06 dx of them.
       buffer_width: each buffer's length (default: the kernel support plus one
         spacing); at least the support.
       t_end: default three flow-through times, ``3 length H / U``.
@@ -64,8 +75,9 @@ def channel_flow(
             "mirror the set-up"
         )
     Re = check_positive("reynolds", reynolds)
-    if profile not in PROFILES:
-        raise ValueError(f"profile must be 'uniform' or 'parabolic', got {profile!r}")
+    for name, value in (("profile", profile), ("initial_profile", initial_profile)):
+        if value not in PROFILES and not (name == "initial_profile" and value is None):
+            raise ValueError(f"{name} must be 'uniform' or 'parabolic', got {value!r}")
     dx = H / n
     kernel = as_kernel(kernel)
     h = dx
@@ -109,13 +121,12 @@ def channel_flow(
             np.full(len(buffers), Kind.OPEN),
         ]
     )
-    flowing = kind != Kind.WALL
-    u = np.asarray(open_system.inflow.velocity_at(x[:, 1]))
+    start = dataclasses.replace(open_system.inflow, profile=initial_profile or profile)
+    u = np.where(kind == Kind.OPEN, open_system.inflow.velocity_at(x[:, 1]), 0.0)
+    u = np.where(kind == Kind.FLUID, start.velocity_at(x[:, 1]), u)
     velocity = np.zeros_like(x)
-    velocity[:, 0] = np.where(flowing, u, 0.0)
-    params = make_params(
-        2, reference_density=rho0, sound_speed=c0, kinematic_viscosity=nu
-    )
+    velocity[:, 0] = u
+    params = make_params(2, reference_density=rho0, sound_speed=c0, kinematic_viscosity=nu)
     margin = (layers + 2) * dx
     model = Model(
         dim=2,
@@ -140,6 +151,7 @@ def channel_flow(
         reynolds=Re,
         viscosity=nu,
         profile=profile,
+        initial_profile=initial_profile or profile,
         buffer_width=W,
         inflow_plane=0.0,
         outflow_plane=L,
