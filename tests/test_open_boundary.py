@@ -53,6 +53,7 @@ def _inflow_flux(case):
     return float(case.params.reference_density * dx * np.sum(u))
 
 
+@pytest.mark.slow
 def test_the_steady_profile_downstream_is_plane_poiseuille(channel):
     """Over the last flow-through time, the mean speed per lattice row between 0.6 L and
     0.9 L is ``4 u_max y (H - y) / H^2`` within 2 % of ``u_max`` (the largest error of the
@@ -65,6 +66,7 @@ def test_the_steady_profile_downstream_is_plane_poiseuille(channel):
     assert error < 0.02, f"profile error {error:.4f} of u_max"
 
 
+@pytest.mark.slow
 def test_the_mass_flux_in_equals_the_mass_flux_out(channel):
     """The mass flux across the channel, averaged over the last flow-through time, near
     the inflow (0.1 L), half-way and near the outflow (0.9 L) equals the inflow's within
@@ -79,6 +81,7 @@ def test_the_mass_flux_in_equals_the_mass_flux_out(channel):
     assert np.allclose(np.asarray(fluxes) / inflow, 1.0, atol=0.015), fluxes
 
 
+@pytest.mark.slow
 def test_three_flow_through_times_stay_stable(channel):
     """No particle is lost (each system keeps its count, every fluid particle stays between
     the walls and inside the channel or its buffers), nothing is NaN, and the fluid's

@@ -59,8 +59,8 @@ def channel_flow(
         ``"parabolic"``; default ``profile``.
       outflow_pressure_factor: the outflow buffer's pressure, ``factor * rho0 c0^2``;
         the default 0.003 (a fifth of the pressure drop along a channel 2 H long at
-        Re = 10) keeps the pressure near the outflow positive, where otherwise fluid
-        particles next to the walls come within 0.06 dx of them.
+        Re = 10) keeps the pressure near the outflow positive; at 0, fluid particles
+        next to the walls near the outflow reached the walls' surface.
       buffer_width: each buffer's length (default: the kernel support plus one
         spacing); at least the support.
       t_end: default three flow-through times, ``3 length H / U``.
