@@ -178,3 +178,16 @@ def test_parameters_the_channel_does_not_read_are_refused():
     with pytest.raises(sphjax.UnusedParameterError, match=r"^artificial_alpha is not used"):
         case.params.replace(artificial_alpha=0.1)
     assert "kinematic_viscosity" in case.params.used
+
+
+def test_channel_flow_runs_from_the_command_line(tmp_path):
+    """``sphjax run channel_flow``: a short run at the coarsest resolution, read back."""
+    from sphjax.cli import main
+
+    out = tmp_path / "channel.h5"
+    argv = ["run", "channel_flow", "--n", "4", "--t-end", "0.02", "--quiet", "--out", str(out)]
+    assert main(argv) == 0
+    trajectory, meta = sphjax.read_trajectory(out)
+    assert meta["complete"] and meta["case"] == "channel_flow"
+    kind = np.asarray(trajectory.states.kind)
+    assert (kind == Kind.OPEN).any() and np.isfinite(np.asarray(trajectory.states.position)).all()

@@ -28,7 +28,7 @@ def channel_flow(
     height: float = 1.0,
     inflow_velocity: float = 1.0,
     reynolds: float = 10.0,
-    profile: str = "uniform",
+    profile: str = "parabolic",
     initial_profile: str | None = None,
     sound_speed_factor: float = 10.0,
     outflow_pressure_factor: float = 0.003,
