@@ -139,7 +139,10 @@ def channel_flow(
             open_system,
         ),
     )
-    state = make_state(x, velocity, rho0, rho0 * dx**2, kind)
+    # every particle at the outflow's pressure (eq. 12 inverted), the masses those of the
+    # lattice at that density, so that the run starts without a pressure jump at the outflow
+    rho_start = rho0 * (1.0 + outflow_pressure_factor)  # Tait, gamma = 1
+    state = make_state(x, velocity, rho_start, rho_start * dx**2, kind)
     flow_through = L / U
     info = dict(
         dx=dx,
@@ -156,7 +159,7 @@ def channel_flow(
         inflow_plane=0.0,
         outflow_plane=L,
         flow_through_time=flow_through,
-        mass_flux=rho0 * U * H,
+        mass_flux=rho_start * U * H,
     )
     t_end = 3.0 * flow_through if t_end is None else t_end
     return finish_case("channel_flow", state, model, params, t_end, info)
