@@ -63,7 +63,8 @@ def main():
         print(f"profile {a:.1f}-{b:.1f} L: max error {worst:.4f} u_max, L2 {l2:.4f}")
     rows = (np.arange(n) + 0.5) * dx
     u_in = poiseuille_profile(rows, H, U) if args.profile == "parabolic" else np.full(n, U)
-    inflow = float(case.params.reference_density) * dx * np.sum(u_in)
+    mass = float(np.asarray(case.state.mass)[np.asarray(case.state.kind) == Kind.OPEN][0])
+    inflow = mass / dx * float(np.sum(u_in))
     fluxes = [
         channel_mass_flux(late, case, x - dx, x + dx) / inflow
         for x in (0.1 * L, 0.3 * L, 0.5 * L, 0.7 * L, 0.9 * L)

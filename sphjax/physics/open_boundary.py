@@ -28,25 +28,27 @@ density sums (:meth:`OpenBoundarySystem.boundary_view`) and in its momentum equa
 
 **Fixed capacity.**  JAX needs fixed shapes, so particles are recycled instead of
 created and deleted (:meth:`OpenBoundarySystem.transfer`, once per step after the
-drift).  When an inflow buffer particle has crossed ``x_in``, a fluid particle has
-crossed ``x_out`` and an outflow buffer particle has left the end of its buffer, the
-three trade places:
+drift).  When an inflow buffer particle has crossed ``x_in`` and an outflow buffer
+particle has left the end of its buffer, they and the most downstream fluid particle
+trade places:
 
 * the fluid particle's slot takes the crossing inflow particle's state: a new fluid
   particle just past ``x_in``;
 * the outflow particle's slot takes the fluid particle's state: a new outflow buffer
-  particle just past ``x_out``;
+  particle at the fluid's downstream end, near ``x_out``;
 * the inflow particle's slot goes back by the buffer width ``W_in``, the new particle
   at the upstream end of the inflow buffer (the buffer's lattice row goes on).
 
-So every block keeps its size and mass in equals mass out, particle by particle.
-Particles that cannot be matched in a step (an inflow column crosses at once, the
-fluid leaves particle by particle) wait: an inflow particle goes on into the fluid with
-its prescribed velocity, a fluid particle goes on as fluid into the outflow buffer, an
-outflow particle beyond the buffer's end; each is matched in the following steps.  The
-trade is a permutation of the particles' data chosen from their positions: gradients
-flow through the data it moves (``jax.grad`` of a run is that of the motion between
-trades, which do not depend on the parameters).
+So every block keeps its size, and mass in equals mass out particle by particle.  The
+fluid keeps its number of particles, so its downstream end sits where that number
+fills the channel: at ``x_out`` for the initial density, a fraction of a spacing
+upstream when the steady pressure compresses it (a fraction of a percent here).  An
+inflow particle that cannot be matched in a step (a uniform inflow's column crosses at
+once, the outflow's particles leave one by one) waits, going on into the fluid with its
+prescribed velocity, as does an outflow particle beyond its buffer's end; each is
+matched in the following steps.  The trade is a permutation of the particles' data
+chosen from their positions: gradients flow through the data it moves (``jax.grad`` of
+a run is that of the motion between trades, which do not depend on the parameters).
 """
 
 from __future__ import annotations
@@ -265,9 +267,10 @@ def _ranked(mask, key):
 
 
 def recycle(state, inflow: Inflow, outflow: Outflow):
-    """Match the inflow buffer particles past ``x_in``, the fluid particles past
-    ``x_out`` and the outflow buffer particles past its end, furthest first, and trade
-    their places (module docstring).  Fields other than the kind move with the data."""
+    """Match the inflow buffer particles past ``x_in`` with the outflow buffer particles
+    past its end and the most downstream fluid particles, furthest first, and trade
+    their places (module docstring).  Fields other than the kind and the reference
+    position move with the data; an outflow particle keeps only its speed along ``x``."""
     x = state.position[:, 0]
     is_open = state.kind == Kind.OPEN
     is_fluid = state.kind == Kind.FLUID
