@@ -29,14 +29,18 @@ from sphjax.physics.open_boundary import Inflow, OpenBoundarySystem, Outflow, re
 
 #: flow-through times of the validation run
 FLOW_THROUGHS = 3.0
+#: time between frames of the validation run, in H / U
+SAMPLE = 0.0371
 
 
 @pytest.fixture(scope="module")
 def channel():
     """A channel 2 H long, 10 particles across, parabolic inflow at Re = 10, run for three
-    flow-through times (6 H / U, about 4,000 steps), a frame every 0.1 H / U."""
+    flow-through times (6 H / U, about 4,000 steps), a frame every 24 steps (0.036 H / U,
+    a time in which no lattice row moves a whole number of spacings: frames in step with
+    the rows would sample the slabs stroboscopically)."""
     case = channel_flow(n=10, length=2.0, profile="parabolic")
-    save_every = max(1, round(0.1 / case.dt))
+    save_every = max(1, round(SAMPLE / case.dt))
     trajectory = sphjax.simulate(
         case, t_end=FLOW_THROUGHS * case.info["flow_through_time"], save_every=save_every
     )
@@ -63,7 +67,7 @@ def _inflow_flux(case):
 def test_the_steady_profile_downstream_is_plane_poiseuille(channel):
     """Over the last flow-through time, the mean speed per lattice row between 0.6 L and
     0.9 L is ``4 u_max y (H - y) / H^2`` within 2 % of ``u_max`` (the largest error of the
-    10 rows; measured 0.9 %)."""
+    10 rows; measured 1.2 %)."""
     case, trajectory = channel
     L, H, U = case.info["length"], case.info["height"], case.info["inflow_velocity"]
     y, u = channel_profile(_late(trajectory), case, 0.6 * L, 0.9 * L)
@@ -76,15 +80,16 @@ def test_the_steady_profile_downstream_is_plane_poiseuille(channel):
 def test_the_mass_flux_in_equals_the_mass_flux_out(channel):
     """The mass flux across the channel, averaged over the last flow-through time, near
     the inflow (0.1 L), half-way and near the outflow (0.9 L) equals the inflow's within
-    1.5 %.  Each is a slab estimate (``sum m u / width`` over a slab 2 dx wide) from 20
-    frames, whose sampling error is about 1 %; recycling itself conserves mass exactly
-    (one particle out of the outflow for each into the inflow)."""
+    1 % (measured within 0.3 %).  Each is a slab estimate (``sum m u / width`` over a slab
+    2 dx wide) from about 55 frames, whose sampling scatter is a few tenths of a percent;
+    recycling itself conserves mass exactly (one particle out of the outflow for each
+    into the inflow)."""
     case, trajectory = channel
     L, dx = case.info["length"], case.info["dx"]
     late = _late(trajectory)
     inflow = _inflow_flux(case)
     fluxes = [channel_mass_flux(late, case, x - dx, x + dx) for x in (0.1 * L, 0.5 * L, 0.9 * L)]
-    assert np.allclose(np.asarray(fluxes) / inflow, 1.0, atol=0.015), fluxes
+    assert np.allclose(np.asarray(fluxes) / inflow, 1.0, atol=0.01), fluxes
 
 
 @pytest.mark.slow

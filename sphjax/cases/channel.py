@@ -49,8 +49,8 @@ def channel_flow(
     ``c0 = sound_speed_factor * u_max``, ``rho0 = 1000``.  Fluid as the Poiseuille case's:
     quintic spline, ``h = dx``, summation density (or ``density="continuity"``), Tait
     with ``gamma = 1``, Morris viscosity, Adami walls.  The parabolic inflow is the
-    validated one (docs/validation_open_boundary.md); a uniform inflow runs, but near
-    the inflow its mass flux is 25 % low at n = 20 (not yet understood).
+    validated one (docs/validation_open_boundary.md); a uniform inflow runs, its mass
+    flux right, but its profile downstream is 3 % of u_max off at n = 20.
 
     Args:
       n: particles across the channel (``dx = H / n``).
