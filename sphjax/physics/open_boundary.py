@@ -211,10 +211,15 @@ class OpenBoundarySystem:
         return {"x": view["x"], "m": view["m"], "v": view["v"]}
 
     def update(self, i: int, views: list, systems: tuple, pairs: dict, ctx, density_step=None):
-        """Pressure (extrapolated from the fluid in the inflow buffer, 0 in the outflow
-        buffer) and density from the fluid's inverse equation of state."""
+        """Pressure (extrapolated from the fluid in the inflow buffer,
+        ``Outflow.pressure`` in the outflow buffer) and density from the fluid's inverse
+        equation of state."""
         view = views[i]
-        j = next(k for k, s in enumerate(systems) if isinstance(s, FluidSystem))
+        j = next((k for k, s in enumerate(systems) if isinstance(s, FluidSystem)), None)
+        if j is None:
+            raise ValueError(
+                "an OpenBoundarySystem needs a fluid: add a FluidSystem() to Model.systems"
+            )
         fluid_system, fluid = systems[j], views[j]
         x = view["x"][:, 0]
         inflow = x < self.middle
