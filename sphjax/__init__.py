@@ -66,6 +66,9 @@ _NAMES = {
     "SolidBoundary": "sphjax.physics.solid.boundary",
     "RigidSystem": "sphjax.physics.rigid.system",
     "WallContact": "sphjax.physics.rigid.contact",
+    "OpenBoundarySystem": "sphjax.physics.open_boundary",
+    "Inflow": "sphjax.physics.open_boundary",
+    "Outflow": "sphjax.physics.open_boundary",
 }
 _MODULES = {"kernels": "sphjax.core.kernels"}
 
@@ -121,6 +124,9 @@ __all__ = [
     "Antuono",
     "MorrisViscosity",
     "NeighborOverflowError",
+    "Inflow",
+    "OpenBoundarySystem",
+    "Outflow",
     "Neighbors",
     "Params",
     "PenaltyForce",

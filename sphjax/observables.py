@@ -3,6 +3,9 @@
 * :func:`surge_front` — the dam-break surge front ``Z`` (Martin & Moyce 1952);
 * :func:`probe_pressure` — the pressure the fluid exerts at a probe point (a wall sensor);
 * :func:`poiseuille_centreline_speed` — the channel's centre-line speed;
+* :func:`channel_profile`, :func:`channel_mass_flux` — the velocity profile and the
+  mass flux across a channel with an inflow and an outflow (against
+  :func:`poiseuille_profile` and :func:`channel_startup_profile`);
 * :func:`centreline_profiles` — a lid-driven cavity's centreline velocities at Ghia, Ghia
   & Shin's (1982) points;
 * :func:`tip_displacement` — the displacement of a solid's tip probe (plate, Turek-Hron);
@@ -58,6 +61,78 @@ def poiseuille_centreline_speed(state, case: Case) -> float:
     near = np.abs(y - L / 2) < 0.6 * dx
     curvature = info["body_force"] / (2 * info["viscosity"]) * (dx / 2) ** 2
     return float(np.mean(u[near])) + curvature
+
+
+def poiseuille_profile(y, height, mean_velocity):
+    """Plane Poiseuille flow of mean speed ``U``: ``u(y) = 4 u_max y (H - y) / H^2``,
+    ``u_max = 1.5 U`` (``y`` from the lower wall)."""
+    y = np.asarray(y, float)
+    return 6.0 * mean_velocity * y * (height - y) / height**2
+
+
+def channel_startup_profile(y, t, height, mean_velocity, viscosity, terms: int = 40):
+    """Plane Poiseuille flow started from a plug at a constant flow rate: ``u(y, t)``
+    for ``u(y, 0) = U``, no slip at ``y = 0, H`` and ``int u dy = U H`` held by the
+    pressure gradient.  With ``eta = y - H/2``, ``u = u_P(y) + sum_j a_j phi_j(eta)
+    exp(-nu k_j^2 t)``, ``phi_j = cos(k_j eta) - cos(k_j H / 2)`` (no net flow, so the
+    pressure gradient takes the constant part), ``tan(k_j H / 2) = k_j H / 2``, and
+    ``a_j`` the projections of ``U - u_P`` on the ``phi_j`` (orthogonal: the operator is
+    symmetric on the functions of zero mean).  ``u_P``: :func:`poiseuille_profile`."""
+    from scipy.optimize import brentq
+
+    H, U, nu = float(height), float(mean_velocity), float(viscosity)
+    y = np.asarray(y, float)
+    grid = (np.arange(4000) + 0.5) / 4000 * H  # midpoint quadrature of the projections
+    initial = U - poiseuille_profile(grid, H, U)
+    u = poiseuille_profile(y, H, U)
+    for j in range(terms):
+        # the root of tan(z) = z in (j pi + pi/2 ... (j + 1) pi + pi/2), z = k H / 2
+        z = brentq(lambda z: np.sin(z) - z * np.cos(z), (j + 1) * np.pi, (j + 1.5) * np.pi - 1e-9)
+        k = 2.0 * z / H
+
+        def phi(yy, k=k):
+            return np.cos(k * (yy - H / 2)) - np.cos(k * H / 2)
+
+        a = np.sum(initial * phi(grid)) / np.sum(phi(grid) ** 2)
+        u = u + a * phi(y) * np.exp(-nu * k**2 * np.asarray(t, float))
+    return u
+
+
+def _slab(states, x0, x1):
+    """Positions and velocities of the fluid particles of ``states`` (one State or a
+    Trajectory's, frames stacked) with ``x0 <= x < x1``, each frame's in one array."""
+    kind = np.asarray(states.kind).reshape(-1)
+    x = np.asarray(states.position).reshape(-1, 2)
+    v = np.asarray(states.velocity).reshape(-1, 2)
+    keep = (kind == Kind.FLUID) & (x[:, 0] >= x0) & (x[:, 0] < x1)
+    return x[keep], v[keep]
+
+
+def channel_profile(states, case: Case, x0: float, x1: float):
+    """``(y, u)``: the mean speed along the channel of the fluid particles between ``x0``
+    and ``x1``, per lattice row (bins of ``dx`` across the channel), averaged over the
+    frames of ``states`` (a State or a Trajectory's ``states``); ``y`` the bins' centres."""
+    H, dx = case.info["height"], case.info["dx"]
+    x, v = _slab(states, x0, x1)
+    rows = int(round(H / dx))
+    index = np.clip(np.floor(x[:, 1] / dx).astype(int), 0, rows - 1)
+    count = np.bincount(index, minlength=rows)
+    total = np.bincount(index, weights=v[:, 0], minlength=rows)
+    y = (np.arange(rows) + 0.5) * dx
+    return y, total / np.maximum(count, 1)
+
+
+def channel_mass_flux(states, case: Case, x0: float, x1: float) -> float:
+    """The mass flux across the channel (per unit depth) at the slab ``[x0, x1)``:
+    ``sum_a m_a u_a / (x1 - x0)`` over its fluid particles, ``= int rho u dy`` on
+    average, averaged over the frames of ``states``."""
+    frames = max(1, int(np.prod(np.asarray(states.time).shape)))
+    kind = np.asarray(states.kind).reshape(-1)
+    x = np.asarray(states.position).reshape(-1, 2)
+    m = np.asarray(states.mass).reshape(-1)
+    u = np.asarray(states.velocity).reshape(-1, 2)[:, 0]
+    keep = (kind == Kind.FLUID) & (x[:, 0] >= x0) & (x[:, 0] < x1)
+    return float(np.sum(m[keep] * u[keep]) / (x1 - x0) / frames)
 
 
 def surge_front(states, case: Case):

@@ -53,6 +53,7 @@ UNUSED = {
     "dam_break_elastic_obstacle": (2, FSI),
     "floating_body": (4, RIGID),
     "sinking_body": (4, RIGID),
+    "channel_flow": (4, MORRIS_WALLS),
 }
 
 # the gradient check evaluates the right-hand side; these are the largest at their

@@ -11,6 +11,7 @@ import inspect
 
 from sphjax.cases._resolution import n_for_spacing
 from sphjax.cases.cavity import lid_driven_cavity
+from sphjax.cases.channel import channel_flow
 from sphjax.cases.fluid import (
     dam_break,
     hydrostatic_tank,
@@ -51,8 +52,12 @@ from sphjax.cases.solid import (
 from sphjax.cases.solid3d import beam_angular_frequency, cantilever_3d, cantilever_reference
 from sphjax.observables import (
     centreline_profiles,
+    channel_mass_flux,
+    channel_profile,
+    channel_startup_profile,
     oscillation_stats,
     poiseuille_centreline_speed,
+    poiseuille_profile,
     probe_pressure,
     surge_front,
     tip_displacement,
@@ -78,6 +83,7 @@ CASES = {
     "dam_break_elastic_obstacle": dam_break_elastic_obstacle,
     "floating_body": floating_body,
     "sinking_body": sinking_body,
+    "channel_flow": channel_flow,
 }
 
 
@@ -152,4 +158,9 @@ __all__ = [
     "floating_body",
     "sinking_body",
     "body_bottom",
+    "channel_flow",
+    "channel_profile",
+    "channel_startup_profile",
+    "channel_mass_flux",
+    "poiseuille_profile",
 ]

@@ -30,6 +30,7 @@ class Kind(enum.IntEnum):
     SOLID = 2  # total-Lagrangian elastic solid particle (SolidSystem)
     CLAMPED = 3  # solid particle whose motion is prescribed (fixed by default; SolidSystem)
     RIGID = 4  # particle of a rigid body (RigidSystem)
+    OPEN = 5  # buffer particle of an inflow or outflow (OpenBoundarySystem)
 
 
 @pytree_dataclass

@@ -103,6 +103,13 @@ def diffeqsolve_case(
             f"SolidSystem.substeps={solid.substeps}: split integration runs in sphjax.simulate "
             "only; use simulate, or set substeps=1 (and the solid's time step) for diffrax"
         )
+    for system in case.model.systems:
+        if getattr(system, "transfer", None) is not None:
+            raise ValueError(
+                f"{type(system).__name__}: particles that enter and leave (open boundaries) "
+                "run in sphjax.simulate only (the diffrax state has no room for the trade of "
+                "places); use simulate"
+            )
     if not _is_traced(dt, t1):
         if not float(dt) > 0:
             raise ValueError(f"dt must be positive, got {dt}")

@@ -58,7 +58,9 @@ def kick_drift(state: State, dt, model) -> State:
     the wall's surface, which the no-slip viscous terms see (a lid sliding along itself,
     a conveyor belt), not a drift; with the transport-velocity formulation fluid
     particles are advected with ``v~ = v_{n+1/2} + dt/2 a_b`` (Adami et al. 2013); clamped
-    particles follow ``SolidSystem.clamped_motion`` or stay put.
+    particles follow ``SolidSystem.clamped_motion`` or stay put.  Last, a system with a
+    ``transfer`` (open boundaries) trades the places of particles that entered or left
+    its zones, at fixed capacity.
     """
     kind = state.kind
     half = 0.5 * dt
@@ -75,7 +77,12 @@ def kick_drift(state: State, dt, model) -> State:
             velocity = jnp.where(moved, (target - state.position) / dt, velocity)
             position = jnp.where(moved, target, position)
     position = wrap_fn(model.domain)(position)
-    return state.replace(position=position, velocity=velocity, time=time)
+    state = state.replace(position=position, velocity=velocity, time=time)
+    for system in model.systems:
+        transfer = getattr(system, "transfer", None)
+        if transfer is not None:  # particles that enter and leave (open boundaries)
+            state = transfer(state)
+    return state
 
 
 def closing_kick(state: State, dt, model) -> State:

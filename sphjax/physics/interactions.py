@@ -16,6 +16,8 @@ the formulation through :func:`sphjax.physics.pairs.pair_sum`.
   fluid (the fluid-wall terms against the pressure, density and velocity of
   :func:`sphjax.physics.fsi.update_solid_boundary`), and every such pair force equal and
   opposite on the solid (:mod:`sphjax.physics.fsi`); the same for a rigid body;
+* fluid-open boundary: eq. 10 and the viscous terms against the buffer particles of an
+  inflow or outflow (:mod:`sphjax.physics.open_boundary`), which move as prescribed;
 * rigid-wall: the contact force that keeps a rigid body off the walls
   (:mod:`sphjax.physics.rigid.contact`); the walls do not move, so it has no reaction.
 
@@ -47,6 +49,7 @@ from sphjax.physics.fluid.viscosity import (
     morris_acceleration,
     morris_acceleration_pullback,
 )
+from sphjax.physics.open_boundary import OpenBoundarySystem
 from sphjax.physics.rigid.system import RigidSystem
 from sphjax.physics.solid.penalty import penalty_force
 from sphjax.physics.solid.system import SolidSystem
@@ -356,6 +359,17 @@ def rigid_wall(system: RigidSystem, body, wall_system: WallSystem, wall, pairs, 
 rigid_wall.active = lambda system, wall_system: system.wall_contact is not None
 
 
+def fluid_open(system: FluidSystem, fluid, open_system: OpenBoundarySystem, buffer, pairs, ctx):
+    """Fluid-open boundary momentum: eq. 10 and the viscous terms against the buffer
+    particles' pressure, density and velocity (:mod:`sphjax.physics.open_boundary`): a
+    fluid particle sees them as fluid.  The buffers move as prescribed, so no reaction."""
+    summand = _fluid_on_boundary(system, ctx.geometry.smoothing_length, True)
+    cols = {"x": buffer["x"], "m": buffer["m"], "rho": buffer["rho"], "p": buffer["p"]}
+    cols = momentum_fields({**cols, "vv": buffer["v"]})
+    rows = _fluid_rows(fluid, False)
+    return ctx.pair_sum(summand, rows, cols, pairs, _fluid_shared(system, ctx), weight="m")
+
+
 #: (row system type, neighbour system type) -> interaction function
 INTERACTIONS = {
     (FluidSystem, FluidSystem): fluid_fluid,
@@ -367,6 +381,7 @@ INTERACTIONS = {
     (FluidSystem, RigidSystem): fluid_solid,
     (RigidSystem, FluidSystem): solid_fluid,
     (RigidSystem, WallSystem): rigid_wall,
+    (FluidSystem, OpenBoundarySystem): fluid_open,
 }
 
 #: pairs of system types whose neighbour lists the update stage needs besides those of

@@ -40,6 +40,10 @@ Methods:
   ``time_step_limits(v_max, params, model, cfl) -> list[float]``: its stable-step
     limits (``v_max``: the largest speed of its free particles; ``cfl``: the Courant
     number of its Params group).
+  ``transfer(state) -> state`` (optional; systems whose particles enter and leave):
+    after each drift, the State with the particles that crossed its zones' planes
+    traded between blocks at fixed capacity (each block keeps its size;
+    :class:`sphjax.physics.open_boundary.OpenBoundarySystem`).
   ``parameters()``, ``unused_parameters()``: the Params fields it reads and a one-line
     refusal for each of its group's fields it does not read (the honest-API rule).
 """
