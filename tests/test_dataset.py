@@ -270,11 +270,11 @@ def test_every_seed_writes_the_same_dt(tmp_path):
     case = sphjax.cases.taylor_green(n=8)
     p = Perturbation((0.8, 1.2), 0.3, 2)
     vary = {"kinematic_viscosity": (0.008, 0.012)}
-    dts = []
-    for seed in (1, 2):
+
+    def written_dt(folder, seed, **given):
         out = generate_dataset(
             case,
-            tmp_path / f"seed{seed}",
+            tmp_path / folder,
             n_train=1,
             n_valid=0,
             n_test=0,
@@ -285,26 +285,14 @@ def test_every_seed_writes_the_same_dt(tmp_path):
             seed=seed,
             progress=False,
             case_kwargs={"n": 8},
+            **given,
         )
-        dts.append(json.loads((out / "metadata.json").read_text())["dt"])
+        return json.loads((out / "metadata.json").read_text())["dt"]
+
+    dts = [written_dt(f"seed{seed}", seed) for seed in (1, 2)]
     assert dts[0] == dts[1] == ensemble_time_step(case, p, vary, {"n": 8})
     # an explicit dt still overrides the rule
-    out = generate_dataset(
-        case,
-        tmp_path / "given",
-        n_train=1,
-        n_valid=0,
-        n_test=0,
-        steps=2,
-        write_every=1,
-        vary=vary,
-        perturbation=p,
-        seed=1,
-        dt=0.5 * dts[0],
-        progress=False,
-        case_kwargs={"n": 8},
-    )
-    assert json.loads((out / "metadata.json").read_text())["dt"] == 0.5 * dts[0]
+    assert written_dt("given", 1, dt=0.5 * dts[0]) == 0.5 * dts[0]
 
 
 @pytest.mark.parametrize("which", ["taylor_green", "taylor_green_same_seed", "dam_break"])
