@@ -546,7 +546,7 @@ def simulate(
         run = functools.partial(
             _simulate_compiled,
             checkpoint_every=checkpoint_every,
-            order=None if order is None else tuple(int(i) for i in order),
+            order=order,
             max_stored=MAX_STORED_CHUNKS,
         )
     else:
@@ -579,20 +579,17 @@ def _initial_carry(state, neighbors):
     return state, neighbors, np.full(2, -1, np.int32), np.zeros((), np.int32)
 
 
-@functools.partial(
-    jax.jit, static_argnames=("model", "segments", "checkpoint_every", "order", "max_stored")
-)
+@functools.partial(jax.jit, static_argnames=("model", "segments", "checkpoint_every", "max_stored"))
 def _simulate_compiled(
     state, neighbors, dt, params, model, *, segments, checkpoint_every, order, max_stored
 ):
     """:func:`_simulate_traced` as one program.  Under an outer transformation without a
     ``jit`` (``jax.grad(loss)(p)``) the run would otherwise be differentiated and executed
     operation by operation, about twice as slow; inside an outer ``jit`` it is inlined.
-    ``order`` (a tuple) maps the run's particles to the user's for error messages;
-    ``max_stored`` is :data:`MAX_STORED_CHUNKS` when called, read by the trace, a part of
-    the cache key."""
+    ``order`` (an array, or ``None``) maps the run's particles to the user's for error
+    messages; ``max_stored`` is :data:`MAX_STORED_CHUNKS` when called, read by the trace,
+    a part of the cache key."""
     del max_stored
-    order = None if order is None else np.asarray(order)
     return _simulate_traced(
         state,
         neighbors,
@@ -628,7 +625,7 @@ def _simulate_traced(state, neighbors, dt, params, model, *, segments, checkpoin
         )
         all_frames.append(frames)
     jax.debug.callback(_raise_overflow, overflowed(carry[1]))
-    jax.debug.callback(functools.partial(_raise_failure, order=order), carry[2], dt)
+    jax.debug.callback(_raise_failure, carry[2], dt, order)
     return _stack(all_frames)
 
 
