@@ -192,10 +192,11 @@ def test_particle_leaving_a_closed_domain_stops_the_run_and_keeps_frames(tmp_pat
     assert float(trajectory.states.position[-1, particle, 1]) <= top
 
 
-def test_an_unstable_run_under_grad_without_jit_raises_the_simulation_error():
+def test_an_unstable_run_under_grad_without_jit_raises_the_simulation_error(monkeypatch):
     """``jax.grad(loss)(p)`` with no ``jit`` runs the simulation when ``simulate`` is
-    called, compiled: its instability is the SimulationError itself (step and particle),
-    not the runtime's wrapper around the check that raised it."""
+    called, compiled: its instability is the SimulationError itself, not the runtime's
+    wrapper around the check that raised it, at the step and (in the user's order of the
+    particles) the particle of the same run made concretely."""
     case = sphjax.cases.get("dam_break", n=4)
 
     def loss(alpha):
@@ -203,8 +204,18 @@ def test_an_unstable_run_under_grad_without_jit_raises_the_simulation_error():
         final = sphjax.simulate(case, params, dt=30 * case.dt, n_steps=40).final
         return final.position.sum()
 
-    with pytest.raises(sphjax.SimulationError, match=r"unstable at step \d+ .* particle \d+"):
+    with pytest.raises(
+        sphjax.SimulationError, match=r"unstable at step \d+ .* particle \d+"
+    ) as traced:
         jax.grad(loss)(case.params.artificial_alpha)
+    # the same run, concrete (the time step check let through)
+    monkeypatch.setattr(sphjax.integration.simulate, "check_time_step", lambda *args: None)
+    with pytest.raises(sphjax.SimulationError) as concrete:
+        sphjax.simulate(case, dt=30 * case.dt, n_steps=40)
+    assert (traced.value.step, traced.value.particle) == (
+        concrete.value.step,
+        concrete.value.particle,
+    )
 
 
 def test_time_step_forced_past_the_check_blows_up(monkeypatch, tmp_path):
