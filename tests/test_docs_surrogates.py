@@ -1,6 +1,7 @@
 """docs/surrogates.md: its reproduce command is the one the figures script runs, and that
 command, at a small size, writes the metadata the page documents, and the shipped model
-was trained on its data; the LagrangeBench recipe writes their set-up (~25 s: the recipe 11 s)."""
+was trained on its data; the LagrangeBench recipe writes their set-up (~25 s, the recipe
+11 s)."""
 
 from __future__ import annotations
 
