@@ -1,6 +1,7 @@
 """docs/surrogates.md: its reproduce command is the one the figures script runs, and that
 command, at a small size, writes the metadata the page documents, and the shipped model
-was trained on its data (~25 s)."""
+was trained on its data; the LagrangeBench recipe writes their set-up (~25 s, the recipe
+11 s)."""
 
 from __future__ import annotations
 
@@ -110,3 +111,81 @@ def test_the_shipped_model_was_trained_on_the_documented_dataset():
     # (the command runs in float32, the tests in float64: the case's speeds differ by
     # rounding)
     assert sim.metadata["dt"] == pytest.approx(dt, rel=1e-6)
+
+
+# LagrangeBench's 2D Taylor-Green (`2D_TGV_2500_10kevery100`), from their generation
+# scripts (docs/surrogates.md, "Against LagrangeBench's 2D Taylor-Green", gives each source):
+LAGRANGEBENCH_TGV2D = {
+    # tumaer/lagrangebench data_gen/lagrangebench_data/dataset_tgv.sh: case.dx=0.02;
+    # notebooks/datasets.ipynb prints traj_shape= (126, 2500, 2)
+    "num_particles_max": 2500,
+    "dx": 0.02,
+    "frames": 126,
+    # dataset_tgv.sh: solver.dt=0.0004 solver.t_end=5
+    "dt": 0.0004,
+    "t_end": 5.0,
+    # tumaer/jax-sph cases/tgv.yaml: io.write_every 100
+    "write_every": 100,
+    # dataset_tgv.sh: seeds 0..199, --split=2_1_1 (gen_dataset.py: 100 / 50 / 50)
+    "num_trajs": (100, 50, 50),
+    # tumaer/jax-sph jax_sph/defaults.py (tag v0.0.2): viscosity 0.01, rho_ref 1, u_ref 1,
+    # c_ref_factor 10, QSK kernel with h_factor 1
+    "kinematic_viscosity": 0.01,
+    "sound_speed": 10.0,
+    "smoothing_length": 0.02,
+}
+
+
+def _lagrangebench_command() -> list[str]:
+    text = DOC.read_text()
+    start = text.index("## Against LagrangeBench's 2D Taylor–Green")
+    section = text[start:].replace("\\\n", " ")
+    lines = [line.strip() for line in section.splitlines() if line.strip().startswith("sphjax")]
+    assert lines, "the LagrangeBench section prints no `sphjax dataset` command"
+    return shlex.split(lines[0])
+
+
+def _option(argv: list[str], name: str) -> str:
+    return argv[argv.index(name) + 1]
+
+
+def test_the_lagrangebench_recipe_writes_their_set_up(tmp_path):
+    lb = LAGRANGEBENCH_TGV2D
+    argv = _lagrangebench_command()
+    assert argv[:3] == ["sphjax", "dataset", "taylor_green"]
+    # at full size: their length, frame time and number of trajectories
+    steps, every = int(_option(argv, "--steps")), int(_option(argv, "--write-every"))
+    dt = float(_option(argv, "--dt"))
+    assert every == lb["write_every"] and dt == lb["dt"]
+    assert steps // every + 1 == lb["frames"] and steps % every == 0
+    assert steps * dt == pytest.approx(lb["t_end"])
+    splits = tuple(int(_option(argv, f"--n-{s}")) for s in ("train", "valid", "test"))
+    assert splits == lb["num_trajs"]
+    # run it at one trajectory and two frames' worth of steps
+    from sphjax.cli import main
+
+    small = list(argv[1:])
+    for name, value in (
+        ("--out", str(tmp_path / "lb")),
+        ("--n-train", "1"),
+        ("--n-valid", "0"),
+        ("--n-test", "0"),
+        ("--steps", str(2 * every)),
+    ):
+        small[small.index(name) + 1] = value
+    assert main([*small, "--no-progress"]) == 0
+    meta = json.loads((tmp_path / "lb" / "metadata.json").read_text())
+    assert meta["num_particles_max"] == lb["num_particles_max"]
+    assert meta["dx"] == pytest.approx(lb["dx"])
+    assert meta["dt"] * meta["write_every"] == pytest.approx(lb["dt"] * lb["write_every"])
+    assert meta["viscosity"] == pytest.approx(lb["kinematic_viscosity"], rel=1e-6)
+    assert meta["sound_speed"] == pytest.approx(lb["sound_speed"])
+    assert meta["smoothing_length"] == pytest.approx(lb["smoothing_length"])
+    assert meta["default_connectivity_radius"] == pytest.approx(1.45 * lb["dx"])
+    assert meta["bounds"] == [[0.0, 1.0], [0.0, 1.0]]
+    assert meta["periodic_boundary_conditions"] == [True, True]
+    assert meta["density_evolution"] is False and meta["p_bg_factor"] == 0.0
+    assert meta["gamma"] == 1.0 and meta["kernel"] == "QuinticSpline"
+    assert meta["varied_params"] == {}
+    assert meta["perturbation"]["amplitude"] == [1.0, 1.0]
+    assert meta["perturbation"]["fourier"] == 0.0
