@@ -251,7 +251,7 @@ class TrajectoryWriter:
         self.xdmf = xdmf_path(self.path) if xdmf else None
         check_new([self.path, *([self.xdmf] if xdmf else [])], argument, overwrite)
         self._argument = argument
-        self._xdmf_next = 0.0
+        self._xdmf_done, self._xdmf_cost = 0.0, 0.0  # when the last rewrite ended, its time
         self._closed = False
         self._reader_holds = False  # a reader kept the file open past WRITER_LOCK_WAIT_S
         self.n_frames = 0
@@ -303,10 +303,11 @@ class TrajectoryWriter:
 
     def _write_xdmf(self, f: h5py.File, now: bool = True) -> None:
         start = time.perf_counter()
-        if self.xdmf is not None and (now or start >= self._xdmf_next):
+        due = self._xdmf_done + self.XDMF_PACE * self._xdmf_cost  # the pace read now
+        if self.xdmf is not None and (now or start >= due):
             write_xdmf(f, self.xdmf)
-            done = time.perf_counter()
-            self._xdmf_next = done + self.XDMF_PACE * (done - start)
+            self._xdmf_done = time.perf_counter()
+            self._xdmf_cost = self._xdmf_done - start
 
     def _open(self) -> h5py.File:
         """The file, opened for one block of writes (closed again after it)."""
