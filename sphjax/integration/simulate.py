@@ -543,12 +543,14 @@ def simulate(
     if traced:
         if model.pair_adjoint:
             refuse_second_order(params, state, dt)
-        run = functools.partial(
-            _simulate_compiled,
-            checkpoint_every=checkpoint_every,
-            order=order,
-            max_stored=MAX_STORED_CHUNKS,
-        )
+        run = functools.partial(_simulate_traced, checkpoint_every=checkpoint_every, order=order)
+        if not inside_trace():  # under an outer jit the run is part of its program already
+            run = functools.partial(
+                _simulate_compiled,
+                checkpoint_every=checkpoint_every,
+                order=order,
+                max_stored=MAX_STORED_CHUNKS,
+            )
     else:
         run = functools.partial(
             _simulate_in_chunks,
@@ -585,7 +587,7 @@ def _simulate_compiled(
 ):
     """:func:`_simulate_traced` as one program.  Under an outer transformation without a
     ``jit`` (``jax.grad(loss)(p)``) the run would otherwise be differentiated and executed
-    operation by operation, about twice as slow; inside an outer ``jit`` it is inlined.
+    operation by operation, about twice as slow (under an outer ``jit`` it is not used).
     ``order`` (an array, or ``None``) maps the run's particles to the user's for error
     messages; ``max_stored`` is :data:`MAX_STORED_CHUNKS` when called, read by the trace,
     a part of the cache key."""
