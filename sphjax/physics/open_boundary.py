@@ -15,7 +15,8 @@ Tafuni, Domínguez, Vacondio & Crespo (2018), as TrixiParticles.jl's open bounda
   extrapolate from mirrored ghost nodes with a first-order corrected SPH interpolation;
   this is that extrapolation averaged over the channel's cross-section, exact for a
   pressure uniform across it);
-* outflow buffer: the pressure is prescribed, ``p = 0`` (the fluid's reference; density
+* outflow buffer: the pressure is prescribed, ``p = Outflow.pressure`` (default 0, the
+  fluid's reference; ``channel_flow`` uses a small positive one; density
   from the fluid's inverse equation of state); each particle keeps the speed along the
   channel it brought from the fluid, ``Du/Dt = 0``, and none across it (the convective
   outflow condition with the particles' own velocity, for a flow that leaves fully
