@@ -86,6 +86,10 @@ class NeighborOverflowWarning(UserWarning):
 #: re-allocates on overflow; traced runs (grad, jit) cannot and keep
 #: ``Model.neighbor_capacity``
 NEIGHBOR_MARGIN = 0.05
+#: a list that overflows in the chunked driver grows to at least this factor times its
+#: old size, and to at least ``OVERFLOW_MIN_SIZE`` slots (rows) (:func:`_grown`)
+OVERFLOW_GROWTH = 1.25
+OVERFLOW_MIN_SIZE = 16
 
 #: the most chunk carries (``checkpoint_every``) one level of reverse mode stores; runs
 #: (and frames) with more chunks are checkpointed in groups of chunks (frames) too
@@ -743,7 +747,7 @@ def _run_chunk_growing(carry, dt, params, model, save_every, n_frames, start, ex
             extra_capacity=extra[0],
             compact_rows=True,
             margin=NEIGHBOR_MARGIN,
-            at_least=widest(old, _needed(lost, model, extra[0])),
+            at_least=widest(old, _grown(old, _needed(lost, model, extra[0]))),
         )
         neighbors = neighbors.replace(reference=lost.reference)
         carry = (state, neighbors, *carry[2:])
@@ -774,6 +778,30 @@ def _growth(old: ListSizes, new: ListSizes, model) -> str:
         if rows != old.members.get(key, 0)
     ]
     return ", ".join(changes)
+
+
+def _grown(old: ListSizes, needed: ListSizes) -> ListSizes:
+    """The sizes to re-allocate to after an overflow: what each list needed, and a list
+    that overflowed at least :data:`OVERFLOW_GROWTH` times its old size and
+    :data:`OVERFLOW_MIN_SIZE`.  A list that overflowed once tends to again (a flow
+    spreading along a wall, or reaching a structure, brings ever more particles to it)
+    and every re-allocation compiles the chunk anew: growing by a factor keeps the
+    number of re-allocations logarithmic in the growth, and the floor spares the lists
+    between two systems that start nearly empty (a fluid's against an obstacle it has
+    not reached: 1 slot, 1 row) one re-allocation per few particles that arrive.
+    Widths stay capped by the search's (:func:`build_neighbors`)."""
+
+    def grow(before: dict, after: dict) -> dict:
+        return {
+            key: max(need, math.ceil(OVERFLOW_GROWTH * before.get(key, 0)), OVERFLOW_MIN_SIZE)
+            if need > before.get(key, 0)
+            else need
+            for key, need in after.items()
+        }
+
+    return ListSizes(
+        needed.search, grow(old.widths, needed.widths), grow(old.members, needed.members)
+    )
 
 
 def _needed(neighbors: Neighbors, model, extra: int) -> ListSizes:
