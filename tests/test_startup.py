@@ -112,3 +112,31 @@ def test_make_state_concrete_equals_traced():
         assert isinstance(a, jax.Array), name
         assert (a.shape, a.dtype) == (b.shape, b.dtype), name
         np.testing.assert_array_equal(np.asarray(a), np.asarray(b), err_msg=name)
+
+
+def test_a_run_compiles_one_chunk_program():
+    """A run's chunks share one compiled program: the last, shorter chunk and the steps
+    after the last whole frame (a remainder frame) run in the same program as the others
+    (their frame buffer is the longest chunk's, the frame spacing and the stop are
+    arguments).  Before: one program per chunk length and per frame spacing, three here.
+    The frames are those of one chunk per frame (the same run in chunks of 7 steps)."""
+    case = sphjax.cases.taylor_green(n=10)
+    compiled = []
+
+    def listen(event, duration, **_):
+        if event == COMPILE_EVENT:
+            compiled.append(duration)
+
+    sphjax.simulate(case, n_steps=3, save_every=3, steps_per_chunk=3)  # warm: set-up
+    jax.monitoring.register_event_duration_secs_listener(listen)
+    try:
+        # 50 steps, a frame every 7: chunks of 4, 3 frames (28 + 21 steps), then 1 step
+        traj = sphjax.simulate(case, n_steps=50, save_every=7, steps_per_chunk=28)
+    finally:
+        jax.monitoring.unregister_event_duration_listener(listen)
+    assert len(compiled) <= 1, len(compiled)
+    np.testing.assert_allclose(np.asarray(traj.times) / case.dt, [0, *range(7, 50, 7), 50])
+    reference = sphjax.simulate(case, n_steps=50, save_every=7, steps_per_chunk=7)
+    np.testing.assert_array_equal(
+        np.asarray(traj.states.position), np.asarray(reference.states.position)
+    )

@@ -302,7 +302,7 @@ def _run_until_stopped(carry, frames, dt, params, start, stop, *, model, save_ev
     return jax.lax.while_loop(running, one_step, (carry, frames))
 
 
-def _run_chunk_checked(carry, frames, dt, params, start, stop, first, *, model, save_every):
+def _run_chunk_checked(carry, frames, dt, params, start, stop, first, save_every, *, model):
     """:func:`_run_until_stopped`, after the run's first evaluation if ``first`` (the
     stepper's ``init``: the rates of the initial state; in the chunk's program rather than
     a program of its own, which would cost a small run's start-up about 0.3 s to compile).
@@ -320,9 +320,10 @@ def _run_chunk_checked(carry, frames, dt, params, start, stop, first, *, model, 
     return carry, frames, state, overflowed(carry[1]).astype(bool)
 
 
-_run_chunk = jax.jit(
-    _run_chunk_checked, static_argnames=("model", "save_every"), donate_argnums=(1,)
-)
+# ``save_every`` and ``stop`` are arguments, not constants, and a run hands every chunk a
+# frame buffer of one size: a run compiles one chunk program whatever its number of steps,
+# its last (shorter) chunk and its remainder steps (a last frame after fewer steps)
+_run_chunk = jax.jit(_run_chunk_checked, static_argnames=("model",), donate_argnums=(1,))
 
 
 # ---------------------------------------------------------------------------- simulate
@@ -352,6 +353,13 @@ def _stack(frames: list[State]) -> State:
             lambda *xs: jax.device_put(np.concatenate([np.asarray(x) for x in xs])), *frames
         )
     return jax.tree_util.tree_map(lambda *xs: jnp.concatenate(xs, axis=0), *frames)
+
+
+def _first(frames: State, n: int) -> State:
+    """The first ``n`` frames (in numpy on the host: no program compiled for the slice)."""
+    if _on_host(frames):
+        return jax.tree_util.tree_map(lambda x: jax.device_put(np.asarray(x)[:n]), frames)
+    return jax.tree_util.tree_map(lambda x: x[:n], frames)
 
 
 def _expand(state: State) -> State:
@@ -655,14 +663,19 @@ def _simulate_in_chunks(
     all_frames = []
     extra = [0]  # neighbour slots added beyond the allocation's own estimate
     base = 0  # steps before the current segment
+
+    def frames_per_chunk(save_every):
+        return max(1, steps_per_chunk // save_every)
+
+    # the frame buffer of every chunk: the longest chunk's (one program for the run)
+    buffer = max(min(frames_per_chunk(every), n) for every, n in segments)
     for save_every, n_frames in segments:
-        frames_per_chunk = max(1, steps_per_chunk // save_every)
         done = 0
         while done < n_frames:
-            k = min(frames_per_chunk, n_frames - done)
+            k = min(frames_per_chunk(save_every), n_frames - done)
             start = base + done * save_every
             carry, frames, initial = _run_chunk_growing(
-                carry, dt, params, model, save_every, k, start, extra, first=not all_frames
+                carry, dt, params, model, save_every, k, start, extra, not all_frames, buffer
             )
             if not all_frames:  # the first chunk: the initial state, its rates evaluated
                 _check_initial_rates(initial, order)
@@ -703,9 +716,13 @@ def _check_initial_rates(state, order):
         )
 
 
-def _run_chunk_growing(carry, dt, params, model, save_every, n_frames, start, extra, first):
+def _run_chunk_growing(
+    carry, dt, params, model, save_every, n_frames, start, extra, first, buffer=None
+):
     """``n_frames`` frames of ``save_every`` steps from step ``start``; at a neighbour-list
-    overflow, re-allocate and go on from the step before it.
+    overflow, re-allocate and go on from the step before it.  ``buffer``: the frames are
+    written into a buffer of this many (at least ``n_frames``; the chunks of a run share
+    one size, so one compiled program), of which the first ``n_frames`` are returned.
 
     The split lists are re-allocated from the most neighbours (and rows with neighbours)
     they met (``Neighbors.counts``, the overflowing step's included; a dam break's fluid
@@ -715,22 +732,25 @@ def _run_chunk_growing(carry, dt, params, model, save_every, n_frames, start, ex
     the frames (those after an unstable step are not filled) and, with ``first``, the
     initial state with its rates (else ``None``)."""
     zeros = np.zeros if _on_host(carry[0]) else jnp.zeros
+    size = n_frames if buffer is None else max(buffer, n_frames)
     frames = jax.tree_util.tree_map(
-        lambda x: jax.device_put(zeros((n_frames, *x.shape), x.dtype)), carry[0]
+        lambda x: jax.device_put(zeros((size, *x.shape), x.dtype)), carry[0]
     )
     stop = start + n_frames * save_every
     stuck = 0  # re-allocations at the same step
     initial = None
-    static = dict(model=model, save_every=save_every)
+    every = np.int32(save_every)
     while True:
         before = int(carry[3])
         carry, frames, started, lost_any = _run_chunk(
-            carry, frames, dt, params, start, stop, np.bool_(first), **static
+            carry, frames, dt, params, start, stop, np.bool_(first), every, model=model
         )
         if first:  # the state after the first evaluation; a repeat starts from its carry
             initial, first = started, False
         state, lost, _, step = carry
         if not bool(lost_any):
+            if size > n_frames:
+                frames = _first(frames, n_frames)
             return carry, frames, initial
         stuck = stuck + 1 if int(step) == before else 0
         if stuck >= 10:
