@@ -56,9 +56,9 @@ def record_pair_sums(case):
         return original(f, rows, cols, pairs, geometry, shared, **options)
 
     pair_module.pair_sum = recording
-    try:
+    try:  # the right-hand side traced here, op by op, so that the calls hold its arrays
         dt = jnp.asarray(case.dt, case.state.position.dtype)
-        rhs.evaluate(case.state, neighbors, model, params, density_step=dt)
+        rhs._evaluate(case.state, neighbors, model, params, density_step=dt)
     finally:
         pair_module.pair_sum = original
     return calls
