@@ -85,6 +85,10 @@ def test_kick_drift_kick_step_is_pure_and_jittable():
     b, _ = step(state, neighbors, case.dt, case.model, case.params)
     np.testing.assert_array_equal(a.position, b.position)
     assert float(a.time) == pytest.approx(case.dt)
+    # called concretely it runs compiled too (one program, not op by op): the same step
+    c, _ = kick_drift_kick(state, neighbors, case.dt, case.model, case.params)
+    np.testing.assert_allclose(c.position, a.position, rtol=0, atol=1e-14)
+    np.testing.assert_allclose(c.velocity, a.velocity, rtol=0, atol=1e-12)
 
 
 def test_hydrostatic_wall_pressure_extrapolation():

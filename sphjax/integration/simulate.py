@@ -109,8 +109,17 @@ def kick_drift_kick(state: State, neighbors: Neighbors, dt, model: Model, params
     The step of :func:`sphjax.integration.stepper.stepper_for` ``(model)``: kick-drift-kick
     with the right-hand side evaluated on neighbour lists updated at the drifted positions;
     a solid with ``substeps > 1`` is sub-cycled inside the step
-    (:mod:`sphjax.integration.split`).
+    (:mod:`sphjax.integration.split`).  Called with concrete arrays outside any trace, the
+    step runs as one compiled program (kept per model and shapes), so that a loop of steps
+    written in Python does not run each step operation by operation.
     """
+    if not _is_traced(state, neighbors, dt, params) and not inside_trace():
+        return _step_compiled(state, neighbors, dt, params, model=model)
+    return stepper_for(model).step((state, neighbors), dt, params)
+
+
+@functools.partial(jax.jit, static_argnames="model")
+def _step_compiled(state, neighbors, dt, params, *, model):
     return stepper_for(model).step((state, neighbors), dt, params)
 
 
