@@ -240,6 +240,12 @@ BAD_INPUT = [
         None,
     ),
     (
+        ["run", "floating_body", "--n", "4", "--set", "contact_friction=0.3", "--quiet"],
+        "--set: contact_friction is not used by this rigid body (it has no wall contact): "
+        "give it RigidSystem(wall_contact=WallContact()) to use it",
+        None,
+    ),
+    (
         [
             "dataset",
             "dam_break",

@@ -22,15 +22,20 @@ from sphjax.core.params import FLUID_DEFAULTS, SOLID_DEFAULTS, UnusedParameterEr
 FLUID_ONLY_VISCOUS = ("artificial_alpha", "artificial_beta", "density_diffusion")
 MORRIS_WALLS = ("artificial_alpha", "artificial_beta", "transport_pressure", "density_diffusion")
 MONAGHAN_WALLS = ("kinematic_viscosity", "transport_pressure")
-FSI = ("kinematic_viscosity", "transport_pressure", "penalty_alpha")
-# a rigid body in water: no elastic fields (it does not deform)
-RIGID = (
+# a rigid body's wall contact: no other system reads these
+CONTACT = ("contact_frequency", "contact_damping_ratio", "contact_friction")
+ELASTIC = ("penalty_alpha", *CONTACT)
+FSI = ("kinematic_viscosity", "transport_pressure", *ELASTIC)
+# a rigid body in water: no elastic fields (it does not deform); the contact's fields only
+# with wall contact
+RIGID_CONTACT = (
     "kinematic_viscosity",
     "transport_pressure",
     "young_modulus",
     "poisson_ratio",
     "penalty_alpha",
 )
+RIGID = (*RIGID_CONTACT, *CONTACT)
 
 # case -> (smallest resolution that builds, the fields its model does not read)
 UNUSED = {
@@ -39,11 +44,11 @@ UNUSED = {
     "lid_driven_cavity": (4, FLUID_ONLY_VISCOUS),
     "hydrostatic_tank": (4, MONAGHAN_WALLS),
     "dam_break": (4, MONAGHAN_WALLS),
-    "oscillating_plate": (2, ("penalty_alpha",)),
-    "turek_hron_csm": (3, ("penalty_alpha",)),
+    "oscillating_plate": (2, ELASTIC),
+    "turek_hron_csm": (3, ELASTIC),
     "abc_flow_3d": (8, FLUID_ONLY_VISCOUS),
     "hydrostatic_tank_3d": (4, MONAGHAN_WALLS),
-    "cantilever_3d": (2, ("penalty_alpha",)),
+    "cantilever_3d": (2, ELASTIC),
     "duct_poiseuille_3d": (4, MORRIS_WALLS),
     "dam_break_3d": (4, MONAGHAN_WALLS),
     "spheric_dam_break_3d": (4, MONAGHAN_WALLS),
@@ -52,7 +57,7 @@ UNUSED = {
     "elastic_gate_dam_break": (2, FSI),
     "dam_break_elastic_obstacle": (2, FSI),
     "floating_body": (4, RIGID),
-    "sinking_body": (4, RIGID),
+    "sinking_body": (4, RIGID_CONTACT),
     "channel_flow": (4, MORRIS_WALLS),
 }
 
@@ -124,7 +129,14 @@ def test_the_refusal_names_the_choice_that_would_read_it():
     with pytest.raises(UnusedParameterError, match=refusal):
         plate.params.replace(penalty_alpha=0.1)
     # the choice that reads it makes it settable
-    assert cases.oscillating_plate(n=2, penalty_alpha=0.1).params.unused == ()
+    assert [n for n, _ in cases.oscillating_plate(n=2, penalty_alpha=0.1).params.unused] == [
+        *CONTACT
+    ]
+    # a rigid body's wall contact: refused by the elastic solid, naming the system to use
+    with pytest.raises(UnusedParameterError, match=r"^contact_friction is not used by this "
+                       r"solid \(an elastic solid has no wall contact\): give a rigid body "
+                       r"RigidSystem\(wall_contact=WallContact\(\)\) to use it$"):  # fmt: skip
+        plate.params.replace(contact_friction=0.3)
     # UnusedParameterError is a ValueError
     with pytest.raises(ValueError):
         dam.params.replace(sound_speed=20.0, kinematic_viscosity=0.5)
@@ -172,16 +184,27 @@ def test_a_group_no_system_reads_is_refused():
 def _perturbed_state(case):
     """A state at which every term of the right-hand side is active: uneven masses, a
     velocity field with approaching pairs, densities off the rest density, and a
-    non-affine deformation of the solids (so the penalty force is not zero)."""
+    non-affine deformation of the solids (so the penalty force is not zero), and a rigid
+    body with wall contact lowered into contact (its bottom row 1.2 spacings above the
+    floor's top row of wall particles), sliding at 2 m/s (so friction caps the contact's
+    tangential dashpot)."""
     s = case.state
     x = s.position
     solid = (s.kind == sphjax.Kind.SOLID)[:, None]
     scale = case.info.get("dx", 0.01)
     bend = 0.02 * scale * jnp.sin(3.0 * x[:, ::-1] / scale) * jnp.cos(2.0 * x / scale)
+    x = jnp.where(solid, x + bend, x)
+    velocity = s.velocity + 0.1 * jnp.cos(5.0 * x / scale)
+    rigid = case.model.system(sphjax.RigidSystem)
+    if rigid is not None and rigid.wall_contact is not None:
+        body = (s.kind == sphjax.Kind.RIGID)[:, None]
+        lowest = jnp.min(jnp.where(body[:, 0], x[:, 1], jnp.inf))
+        x = jnp.where(body, x.at[:, 1].add(0.7 * scale - lowest), x)
+        velocity = jnp.where(body, velocity.at[:, 0].add(2.0), velocity)
     return s.replace(
-        position=jnp.where(solid, x + bend, x),
+        position=x,
         mass=s.mass * (1.0 + 0.05 * jnp.sin(7.0 * x[:, 0] / scale)),
-        velocity=s.velocity + 0.1 * jnp.cos(5.0 * x / scale),
+        velocity=velocity,
         density=s.density * (1.0 + 1e-3 * jnp.sin(3.0 * x[:, 0] / scale)),
         shift_acceleration=jnp.ones_like(s.shift_acceleration),
     )

@@ -162,6 +162,10 @@ def _contact_term(state, neighbors, model, params):
     return rigid_wall(model.systems[i], views[i], model.systems[j], views[j], pairs, ctx)["a"]
 
 
+CONTACT = ("frequency", "damping_ratio", "friction")
+CONTACT_FIELDS = tuple(f"contact_{name}" for name in CONTACT)
+
+
 def test_wall_contact_is_the_spring_and_dashpot_force_summed_over_the_body():
     """A level body whose bottom row lies 1.2 spacings above the floor's wall particles
     (inside the contact distance 1.5 dx of the wall particle under each, beyond that of
@@ -169,12 +173,13 @@ def test_wall_contact_is_the_spring_and_dashpot_force_summed_over_the_body():
     body (``rows`` particles per column) ``omega^2 0.3 dx / rows``; sliding at ``u``, the
     tangential dashpot adds ``-min(2 zeta omega u, mu F_n) / rows`` per unit mass."""
     case = sinking_body(n=4)
-    contact = case.model.systems[-1].wall_contact
+    # the contact's Params: frequency, damping ratio and friction
+    omega, zeta, mu = (float(getattr(case.params, f"contact_{name}")) for name in CONTACT)
     free = case.model.replace(
         systems=(*case.model.systems[:-1], case.model.systems[-1].replace(wall_contact=None))
     )
     state, idx = _lowered(case, 1.2)
-    rows, dx, omega = 4, case.info["dx"], contact.frequency
+    rows, dx = 4, case.info["dx"]
     with_contact = _body_acceleration(case, state)[idx]
     without = _body_acceleration(case.replace(model=free), state)[idx]
     push = with_contact - without
@@ -187,11 +192,11 @@ def test_wall_contact_is_the_spring_and_dashpot_force_summed_over_the_body():
         _body_acceleration(case, sliding)[idx]
         - _body_acceleration(case.replace(model=free), sliding)[idx]
     )
-    assert 2 * contact.damping_ratio * omega * u < contact.friction * omega**2 * 0.3 * dx
+    assert 2 * zeta * omega * u < mu * omega**2 * 0.3 * dx
     # the centre of mass's acceleration (equal masses: the mean; the friction on the
     # bottom row also tips the body, so the particles' accelerations differ)
     centre = float(np.mean(drag[:, 0]))
-    assert centre == pytest.approx(-2 * contact.damping_ratio * omega * u / rows, rel=1e-9)
+    assert centre == pytest.approx(-2 * zeta * omega * u / rows, rel=1e-9)
     # beyond the contact distance: nothing.  The contact term is exactly zero (the
     # walls' particles are in the body's list, out of reach), and so the accelerations
     # with contact are those without it; the two compiled programs differ in the order of
@@ -247,10 +252,12 @@ def test_bodies_that_sink_or_float_are_refused_by_the_other_case():
         floating_body(density_ratio=1.5)
     with pytest.raises(ValueError, match=r"^release_height \+ body_height = 0.5 must lie below"):
         sinking_body(release_height=0.4)
-    with pytest.raises(ValueError, match=r"^WallContact.frequency must be a number > 0, got -1"):
-        sphjax.WallContact(frequency=-1)
+    with pytest.raises(ValueError, match=r"^Params.contact_frequency must be a positive number"):
+        sinking_body(n=4).params.replace(contact_frequency=-1.0)
+    with pytest.raises(ValueError, match=r"^WallContact takes only distance=.*contact_frequency"):
+        sphjax.WallContact(frequency=800.0)  # a Params field now
     with pytest.raises(ValueError, match=r"^WallContact.distance must be a number > 1, got 0.5"):
-        sphjax.WallContact(frequency=100.0, distance=0.5)
+        sphjax.WallContact(distance=0.5)
     with pytest.raises(ValueError, match=r"^RigidSystem.wall_contact must be WallContact"):
         sphjax.RigidSystem(wall_contact=100.0)
 
@@ -273,3 +280,65 @@ def test_the_body_and_the_walls_get_neighbour_lists_only_with_wall_contact():
         ("RigidSystem", "WallSystem"),
         ("WallSystem", "RigidSystem"),
     }
+
+
+def _sliding_onto_the_floor(case):
+    """``case``'s state with its body 1.2 spacings above the floor's wall particles (in
+    contact), sliding at 2 m/s and pressing down at 0.2 m/s: the tangential dashpot's
+    force is capped by the friction (``2 zeta omega u > mu F_n``)."""
+    state, idx = _lowered(case, 1.2)
+    return state.replace(velocity=state.velocity.at[idx].set(jnp.asarray([2.0, -0.2])))
+
+
+def test_the_gradients_through_wall_contact_match_finite_differences():
+    """The body's bottom height and its horizontal travel after 30 steps in contact
+    (sliding onto the floor), differentiated with respect to each contact Param
+    (``jax.jacrev`` through the run), against central differences of relative step
+    1e-5: they agree to 1e-6 (measured 2e-10 to 2e-8).  A stiffer spring lowers the
+    body less (d bottom / d omega > 0), more friction shortens its slide."""
+    case = sinking_body(n=4)  # float64 (tests/conftest.py)
+    state = _sliding_onto_the_floor(case)
+    idx = jnp.asarray(case.info["body_indices"])
+
+    def outputs(values):
+        params = case.params.replace(**dict(zip(CONTACT_FIELDS, values, strict=True)))
+        final = sphjax.simulate(case, params, n_steps=30, state=state).states
+        x = final.position[-1, idx]
+        return jnp.stack([jnp.mean(x[:, 1]), jnp.mean(x[:, 0])])  # bottom + hb / 2, travel
+
+    values = jnp.asarray([float(getattr(case.params, name)) for name in CONTACT_FIELDS])
+    jacobian = np.asarray(jax.jit(jax.jacrev(outputs))(values))
+    forward = jax.jit(outputs)
+    for k, name in enumerate(CONTACT_FIELDS):
+        step = 1e-5 * float(values[k])
+        up, down = values.at[k].add(step), values.at[k].add(-step)
+        fd = (np.asarray(forward(up)) - np.asarray(forward(down))) / (2 * step)
+        np.testing.assert_allclose(jacobian[:, k], fd, rtol=1e-6, err_msg=name)
+        assert np.all(jacobian[:, k] != 0.0), name  # each acts on both
+    assert jacobian[0, 0] > 0  # a stiffer spring: the body sinks into it less
+    assert jacobian[1, 2] < 0  # more friction: a shorter slide
+
+
+def test_the_contact_params_default_to_the_case_values_and_act_only_with_wall_contact():
+    """The sinking body's Params carry its contact's values (``WallContact``'s former
+    defaults, the frequency from ``sinking_body``'s rule) and its model reads them; the
+    floating body (no wall contact) refuses them with one line naming the fix, for
+    concrete values and tracers alike."""
+    sinking = sinking_body(n=4)
+    dx, g, hb = sinking.info["dx"], 9.81, sinking.info["body_height"]
+    assert float(sinking.params.contact_frequency) == np.sqrt(100.0 * g * hb) / dx
+    assert float(sinking.params.contact_damping_ratio) == 1.0
+    assert float(sinking.params.contact_friction) == 0.5
+    assert set(CONTACT_FIELDS) <= set(sinking.params.used)
+    assert sinking.dt <= 0.2 / float(sinking.params.contact_frequency)
+    floating = floating_body(n=4)
+    assert not set(CONTACT_FIELDS) & set(floating.params.used)
+    for name in CONTACT_FIELDS:
+        message = (
+            f"^{name} is not used by this rigid body \\(it has no wall contact\\): give it "
+            r"RigidSystem\(wall_contact=WallContact\(\)\) to use it$"
+        )
+        with pytest.raises(sphjax.UnusedParameterError, match=message):
+            floating.params.replace(**{name: 1.0})
+        with pytest.raises(sphjax.UnusedParameterError, match=message.removesuffix("$")):
+            jax.grad(lambda v, name=name: floating.params.replace(**{name: v}).gravity[1])(1.0)

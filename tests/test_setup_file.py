@@ -481,20 +481,31 @@ def test_the_base_files_are_valid(tmp_path):
     body = from_toml(_write(tmp_path, "c.toml", BASE + RIGID))
     assert body.info["n_rigid"] == 4 and body.info["n_fluid"] == 36 - 4  # cut out
     assert body.model.systems[-1].wall_contact is None
+    with pytest.raises(sphjax.UnusedParameterError, match=r"^contact_frequency is not used"):
+        body.params.replace(contact_frequency=800.0)
 
 
 def test_a_rigid_contact_table_gives_the_body_wall_contact(tmp_path):
-    """``[rigid.contact]`` is ``RigidSystem(wall_contact=WallContact(...))``, its
-    defaults WallContact's, and with it the body and the walls get neighbour lists."""
+    """``[rigid.contact]`` is ``RigidSystem(wall_contact=WallContact(distance=...))`` and
+    the contact's Params (``frequency``, ``damping_ratio``, ``friction``: 1 and 0.5 by
+    default), and with it the body and the walls get neighbour lists; without it the
+    contact's Params are refused."""
     from sphjax.physics.rhs import neighbor_pairs
 
     text = BASE + RIGID + "[rigid.contact]\nfrequency = 800.0\nfriction = 0.2\n"
     body = from_toml(_write(tmp_path, "contact.toml", text))
-    assert body.model.systems[-1].wall_contact == sphjax.WallContact(800.0, friction=0.2)
+    # the static distance on the model, the spring, dashpot and friction as Params
+    assert body.model.systems[-1].wall_contact == sphjax.WallContact(distance=1.5)
+    assert float(body.params.contact_frequency) == 800.0
+    assert float(body.params.contact_damping_ratio) == 1.0
+    assert float(body.params.contact_friction) == 0.2
+    assert {"contact_frequency", "contact_damping_ratio", "contact_friction"} <= set(
+        body.params.used
+    )
     types = [type(s).__name__ for s in body.model.systems]
     pairs = {(types[i], types[j]) for i, j in neighbor_pairs(body.model)}
     assert ("RigidSystem", "WallSystem") in pairs
-    assert body.dt <= sphjax.WallContact(800.0).time_step_limit()
+    assert body.dt <= sphjax.WallContact.time_step_limit(body.params)
     assert isinstance(body.model.systems[-1], sphjax.RigidSystem)
 
 

@@ -107,6 +107,8 @@ def sinking_body(
     sound_speed_factor: float = 20.0,
     artificial_alpha: float = 0.1,
     contact_frequency: float | None = None,
+    contact_damping_ratio: float = 1.0,
+    contact_friction: float = 0.5,
     t_end: float = 1.5,
 ) -> Case:
     """A rectangular rigid body denser than water released in a tank: it sinks and comes
@@ -118,7 +120,10 @@ def sinking_body(
     The fluid and the body are the floating body's (:func:`floating_body`); the body has
     wall contact (:class:`~sphjax.WallContact`, a spring-dashpot force between its
     particles and the wall particles within 1.5 spacings, critically damped), so it comes
-    to rest with its bottom less than half a spacing above the floor.
+    to rest with its bottom less than half a spacing above the floor.  The contact's
+    frequency, damping ratio and friction are the Params fields ``contact_frequency``,
+    ``contact_damping_ratio`` and ``contact_friction`` (differentiable); the arguments
+    below set their values in ``case.params``.
 
     Args:
       n: particles across the body's height (``dx = body_height / n``).
@@ -126,6 +131,8 @@ def sinking_body(
       contact_frequency: the contact's ``omega`` (rad/s); ``None``:
         ``sqrt(100 g body_height) / dx``, which compresses the contact springs under the
         body's weight by about ``dx / 100``.
+      contact_damping_ratio: the contact dashpots' fraction ``zeta`` of critical damping.
+      contact_friction: the contact's Coulomb coefficient ``mu``.
     """
     n = check_resolution("n", n, 4)
     hb = check_positive("body_height", body_height)
@@ -147,7 +154,12 @@ def sinking_body(
     g = check_positive("gravity", gravity)
     if contact_frequency is None:
         contact_frequency = math.sqrt(100.0 * g * hb) / dx
-    contact = WallContact(frequency=check_positive("contact_frequency", contact_frequency))
+    contact = WallContact()
+    values = dict(
+        contact_frequency=check_positive("contact_frequency", contact_frequency),
+        contact_damping_ratio=contact_damping_ratio,
+        contact_friction=contact_friction,
+    )
     tank = _BodyInTank(n, body_width, hb, ratio, rows_up, water_depth, tank_width, gravity)
     return tank.case(
         "sinking_body",
@@ -155,7 +167,11 @@ def sinking_body(
         sound_speed_factor,
         artificial_alpha,
         t_end,
-        dict(contact_frequency=contact.frequency, contact_distance=contact.distance * dx),
+        dict(
+            contact_frequency=values["contact_frequency"],
+            contact_distance=contact.distance * dx,
+        ),
+        values,
     )
 
 
@@ -187,8 +203,11 @@ class _BodyInTank:
         self.fluid = water[~inside]
         self.body = lattice([x0, y0], [x0 + w, y0 + hb], dx)
 
-    def case(self, name, rigid, sound_speed_factor, artificial_alpha, t_end, info) -> Case:
-        """The Case: fluid, tank walls and ``rigid`` (a :class:`RigidSystem`)."""
+    def case(
+        self, name, rigid, sound_speed_factor, artificial_alpha, t_end, info, values=None
+    ) -> Case:
+        """The Case: fluid, tank walls and ``rigid`` (a :class:`RigidSystem`); ``values``:
+        more Params fields (the wall contact's)."""
         dx, g, D, W = self.dx, self.gravity, self.water_depth, self.tank_width
         hb, fluid, body = self.body_height, self.fluid, self.body
         kernel, h = WendlandC2(), 1.5 * dx
@@ -213,6 +232,7 @@ class _BodyInTank:
             sound_speed=c0,
             artificial_alpha=artificial_alpha,
             solid_density=self.ratio * WATER_DENSITY,
+            **(values or {}),
         )
         cell = dx * dx
 

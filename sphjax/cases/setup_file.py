@@ -448,8 +448,9 @@ def _rigid(table, dim, folder, coupled: bool) -> dict:
     return r
 
 
-def _wall_contact(rigid: _Table) -> WallContact:
-    """``[rigid.contact]``: the body's contact with the walls (:class:`WallContact`)."""
+def _wall_contact(rigid: _Table) -> dict:
+    """``[rigid.contact]``: the body's contact with the walls: ``wall_contact``
+    (:class:`WallContact`, its static distance) and ``values``, its Params fields."""
     t = _Table(rigid.table["contact"], rigid.key("contact"))
     frequency = t.get("frequency", "number", positive=True, hint=" (omega in rad/s)")
     damping_ratio = t.get("damping_ratio", "number", 1.0, non_negative=True)
@@ -458,7 +459,12 @@ def _wall_contact(rigid: _Table) -> WallContact:
         raise SetupError(t.key("distance"), f"must be >= 1 (particle spacings), got {distance!r}")
     friction = t.get("friction", "number", 0.5, non_negative=True)
     t.done()
-    return WallContact(frequency, damping_ratio, distance, friction)
+    values = dict(
+        contact_frequency=frequency,
+        contact_damping_ratio=damping_ratio,
+        contact_friction=friction,
+    )
+    return dict(wall_contact=WallContact(distance=distance), values=values)
 
 
 def _substeps(t: _Table):
@@ -742,8 +748,9 @@ def build_setup(s: dict) -> Case:
         )
     if rigid is not None:
         boundary = SolidBoundary(no_slip=rigid["slip"] == "no_slip")
-        systems.append(RigidSystem(boundary, wall_contact=rigid["contact"]))
-        values.update(solid_density=rigid["density"])
+        contact = rigid["contact"] or dict(wall_contact=None, values={})
+        systems.append(RigidSystem(boundary, wall_contact=contact["wall_contact"]))
+        values.update(solid_density=rigid["density"], **contact["values"])
     params = make_params(dim, gravity=tuple(gravity), **values)
     domain = _model_domain(s, x, dx, gravity)
     model = Model(dim=dim, smoothing_length=h, kernel=kernel, domain=domain, systems=tuple(systems))

@@ -16,7 +16,7 @@ from __future__ import annotations
 import dataclasses
 
 from sphjax.core.kernels import Kernel, QuinticSpline
-from sphjax.core.params import GROUPS, fields, refusal
+from sphjax.core.params import CONTACT_FIELDS, GROUPS, fields, refusal
 
 
 @dataclasses.dataclass(frozen=True)
@@ -146,13 +146,15 @@ class Model:
             for name, why in getattr(system, "unused_parameters", dict)().items():
                 if name not in read:
                     unused.setdefault(name, why)
-        system_of = {"fluid": "FluidSystem", "solid": "SolidSystem"}
+        system_of = {"fluid": "FluidSystem()", "solid": "SolidSystem()"}
         for group, defaults in GROUPS.items():  # a group no system of the model reads
             for name in defaults:
                 if name not in read and name not in unused:
-                    unused[name] = refusal(
-                        name, "model", f"it has no {group}", f"add a {system_of[group]}()"
-                    )
+                    why, fix = f"it has no {group}", f"add a {system_of[group]}"
+                    if name in CONTACT_FIELDS:
+                        why = "it has no rigid body"
+                        fix = "add a RigidSystem(wall_contact=WallContact())"
+                    unused[name] = refusal(name, "model", why, fix)
         return tuple(sorted(unused.items(), key=lambda item: fields().index(item[0])))
 
     def replace(self, **changes) -> Model:

@@ -1,7 +1,8 @@
 """Differentiable parameters: every float ``jax.grad`` should see, grouped by system.
 
 * :class:`FluidParams` — the weakly compressible fluid (eqs. 10-12, viscosities, delta-SPH).
-* :class:`SolidParams` — the elastic solid (eqs. 14, 18-19, penalty force).
+* :class:`SolidParams` — the bodies: the elastic solid (eqs. 14, 18-19, penalty force) and a
+  rigid body's wall contact (:class:`~sphjax.WallContact`).
 * :class:`Params` — the body acceleration ``gravity`` and one group per kind of system the
   model has (``None`` for a kind it lacks).
 
@@ -78,19 +79,30 @@ class FluidParams:
 
 @pytree_dataclass
 class SolidParams:
-    """Parameters of a total-Lagrangian elastic solid.
+    """Parameters of the bodies: a total-Lagrangian elastic solid, a rigid body and its
+    contact with the walls.
 
     Attributes:
       young_modulus: Young's modulus ``E`` (eq. 19).
       poisson_ratio: Poisson's ratio ``nu`` (eq. 19).
-      solid_density: reference density ``rho0`` (eq. 14).
+      solid_density: reference density ``rho0`` (eq. 14); a rigid body's density.
       penalty_alpha: hourglass penalty coefficient (eq. 14, Ganzenmüller 2015).
+      contact_frequency: a rigid body's wall contact (:class:`~sphjax.WallContact`):
+        ``omega`` in rad/s, the stiffness per unit mass of a body particle's spring,
+        ``k = m omega^2`` (> 0).
+      contact_damping_ratio: the contact dashpots' fraction ``zeta`` of critical damping
+        (>= 0; 1: a particle on its spring comes to rest without bouncing).
+      contact_friction: the Coulomb coefficient ``mu`` that caps the contact's tangential
+        dashpot (>= 0; 0: the body slides freely).
     """
 
     young_modulus: Array
     poisson_ratio: Array
     solid_density: Array
     penalty_alpha: Array
+    contact_frequency: Array
+    contact_damping_ratio: Array
+    contact_friction: Array
 
 
 FLUID_DEFAULTS = dict(
@@ -105,8 +117,17 @@ FLUID_DEFAULTS = dict(
     density_diffusion=0.1,
 )
 SOLID_DEFAULTS = dict(
-    young_modulus=1.0e6, poisson_ratio=0.3, solid_density=1000.0, penalty_alpha=0.0
+    young_modulus=1.0e6,
+    poisson_ratio=0.3,
+    solid_density=1000.0,
+    penalty_alpha=0.0,
+    # a rigid body's wall contact (sphjax.cases.sinking_body sets a frequency for its body)
+    contact_frequency=800.0,
+    contact_damping_ratio=1.0,
+    contact_friction=0.5,
 )
+#: the fields of a rigid body's wall contact (read only by a RigidSystem with wall_contact)
+CONTACT_FIELDS = ("contact_frequency", "contact_damping_ratio", "contact_friction")
 GROUPS = {"fluid": FLUID_DEFAULTS, "solid": SOLID_DEFAULTS}
 
 # field -> (test, what the value must be)
@@ -127,6 +148,9 @@ RULES = dict(
     poisson_ratio=(lambda v: -1.0 < v < 0.5, "a number in (-1, 0.5)"),
     solid_density=_POSITIVE,
     penalty_alpha=_NON_NEGATIVE,
+    contact_frequency=_POSITIVE,
+    contact_damping_ratio=_NON_NEGATIVE,
+    contact_friction=_NON_NEGATIVE,
 )
 
 

@@ -31,6 +31,11 @@ wall has its particles ``dx + g`` from the wall's: with ``distance = 1.5`` the c
 acts within half a spacing of the surfaces touching, and a body at rest on a floor under
 a load ``F`` per particle column stays ``0.5 dx - F / k`` above it.
 
+``omega``, ``zeta`` and ``mu`` are differentiable Params fields (``contact_frequency``,
+``contact_damping_ratio``, ``contact_friction`` of :class:`~sphjax.SolidParams`); the
+contact distance ``distance`` is static, on :class:`WallContact` (it decides which pairs
+touch).
+
 The forces ``f_ab`` enter the body's resultant force and torque with the fluid's
 (:func:`sphjax.physics.rigid.system.rigid_acceleration`); the walls do not move.
 
@@ -46,96 +51,102 @@ from __future__ import annotations
 import dataclasses
 import functools
 import math
+from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
 
 from sphjax.core.space import dot, scale
 
-
-def _check(name: str, value, *, at_least: float, strict: bool, fix: str) -> float:
-    number = (
-        float(value) if isinstance(value, int | float) and not isinstance(value, bool) else None
-    )
-    if (
-        number is None
-        or not math.isfinite(number)
-        or not (number > at_least if strict else number >= at_least)
-    ):
-        relation = ">" if strict else ">="
-        raise ValueError(
-            f"WallContact.{name} must be a number {relation} {at_least:g}, got {value!r}; {fix}"
-        )
-    return number
+_MOVED = {
+    "frequency": "contact_frequency",
+    "damping_ratio": "contact_damping_ratio",
+    "friction": "contact_friction",
+}
 
 
-@dataclasses.dataclass(frozen=True)
+@dataclasses.dataclass(frozen=True, init=False)
 class WallContact:
     """Contact of a rigid body with the walls (module docstring): a spring-dashpot force
     between its particles and the wall particles within ``distance`` particle spacings.
 
+    The spring's frequency ``omega``, the dashpots' damping ratio ``zeta`` and the
+    friction coefficient ``mu`` are differentiable :class:`~sphjax.Params` fields,
+    ``contact_frequency``, ``contact_damping_ratio`` and ``contact_friction`` (the case
+    sets them: ``make_params(..., contact_frequency=800.0)``, ``params.replace(...)``), so
+    ``jax.grad`` sees them; a model whose body has no wall contact refuses them
+    (:class:`~sphjax.UnusedParameterError`).
+
+    The contact distance stays static, here: it decides which body-wall pairs exist (the
+    pairs the force acts on, and that the model forms body-wall neighbour lists at all),
+    a structural choice like the smoothing length, checked once against the neighbour
+    lists' reach; the force also jumps where a pair crosses it (an approaching particle's
+    dashpot), so it has no useful derivative.
+
     Attributes:
-      frequency: ``omega`` in rad/s, the stiffness per unit mass of a body particle's
-        spring, ``k = m omega^2``.  A body of ``n`` particles across its height resting on
-        a floor compresses its springs by about ``n g / omega^2``.
-      damping_ratio: ``zeta``, the dashpot's fraction of critical damping (1: a particle
-        on its spring comes to rest without bouncing).
       distance: the contact distance in the body's particle spacings (> 1: the force
         starts before the surfaces touch; it must stay within the kernel's support, where
-        the neighbour lists reach).
-      friction: ``mu``, the Coulomb coefficient that caps the tangential dashpot's force
-        (0: the body slides freely).
+        the neighbour lists reach).  Keyword only.
     """
 
-    frequency: float
-    damping_ratio: float = 1.0
     distance: float = 1.5
-    friction: float = 0.5
 
-    def __post_init__(self):
-        fix = "e.g. WallContact(frequency=800.0, damping_ratio=1.0, distance=1.5)"
-        object.__setattr__(
-            self,
-            "frequency",
-            _check("frequency", self.frequency, at_least=0.0, strict=True, fix=fix),
-        )
-        object.__setattr__(
-            self,
-            "damping_ratio",
-            _check("damping_ratio", self.damping_ratio, at_least=0.0, strict=False, fix=fix),
-        )
-        object.__setattr__(
-            self, "distance", _check("distance", self.distance, at_least=1.0, strict=True, fix=fix)
-        )
-        object.__setattr__(
-            self, "friction", _check("friction", self.friction, at_least=0.0, strict=False, fix=fix)
-        )
+    parameters = ("contact_frequency", "contact_damping_ratio", "contact_friction")
 
-    def time_step_limit(self) -> float:
-        """``0.2 / omega``: about 30 steps a period of one particle's spring (a body's
-        own contact frequency, ``omega`` over the square root of its particles per
-        column, is lower)."""
-        return 0.2 / self.frequency
+    def __init__(self, *args, distance: float = 1.5, **moved):
+        if args or moved:
+            names = [_MOVED.get(name, name) for name in moved] or ["contact_frequency"]
+            raise ValueError(
+                f"WallContact takes only distance= (the contact distance in spacings); its "
+                f"spring and friction are Params fields ({', '.join(names)}): set them with "
+                f"make_params(..., {names[0]}=...) or params.replace({names[0]}=...)"
+            )
+        number = (
+            float(distance)
+            if isinstance(distance, int | float) and not isinstance(distance, bool)
+            else None
+        )
+        if number is None or not math.isfinite(number) or not number > 1.0:
+            raise ValueError(
+                f"WallContact.distance must be a number > 1, got {distance!r}; "
+                "e.g. WallContact(distance=1.5)"
+            )
+        object.__setattr__(self, "distance", number)
+
+    @staticmethod
+    def time_step_limit(params) -> float:
+        """``0.2 / omega`` (``params.contact_frequency``, concrete): about 30 steps a
+        period of one particle's spring (a body's own contact frequency, ``omega`` over
+        the square root of its particles per column, is lower)."""
+        return 0.2 / float(params.contact_frequency)
 
     def acceleration(self, body: dict, wall: dict, pairs, ctx) -> jax.Array:
         """``sum_b f_ab / m_a`` of each body particle ``a`` over the wall particles ``b``
-        (``body``: ``x, v, V``; ``wall``: ``x, v``)."""
-        summand = functools.partial(
-            contact_summand,
-            frequency=self.frequency,
-            damping_ratio=self.damping_ratio,
-            distance=self.distance,
-            friction=self.friction,
+        (``body``: ``x, v, V``; ``wall``: ``x, v``), with the contact's Params
+        (``ctx.params``)."""
+        solid = ctx.params.solid
+        shared = ContactParameters(
+            solid.contact_frequency, solid.contact_damping_ratio, solid.contact_friction
         )
+        summand = functools.partial(contact_summand, distance=self.distance)
         rows = {"x": body["x"], "v": body["v"], "V": body["V"]}
         cols = {"x": wall["x"], "v": wall["v"]}
-        return ctx.pair_sum(summand, rows, cols, pairs)["a"]
+        return ctx.pair_sum(summand, rows, cols, pairs, shared)["a"]
 
 
-def contact_summand(pair, a, b, shared, *, frequency, damping_ratio, distance, friction):
+class ContactParameters(NamedTuple):
+    """The contact's Params every pair sees (``pair_sum``'s ``shared``), by name."""
+
+    frequency: object
+    damping_ratio: object
+    friction: object
+
+
+def contact_summand(pair, a, b, shared: ContactParameters, *, distance):
     """``f_ab / m_a`` (module docstring): ``max(omega^2 delta_ab - 2 zeta omega v_n, 0)``
     along ``n_ab``, less the tangential dashpot ``2 zeta omega v_t`` capped at ``mu`` times
     that; zero beyond the contact distance, for padding and at ``r = 0``."""
+    frequency, damping_ratio, friction = shared
     dim = pair.dr.shape[-1]
     reach = distance * a["V"] ** (1.0 / dim)
     touching = pair.mask & (pair.r > 0.0) & (pair.r < reach)

@@ -35,7 +35,7 @@ import dataclasses
 
 import jax.numpy as jnp
 
-from sphjax.core.params import SOLID_DEFAULTS, refusal
+from sphjax.core.params import CONTACT_FIELDS, SOLID_DEFAULTS, refusal
 from sphjax.core.state import Kind
 from sphjax.physics import fsi
 from sphjax.physics.fluid.system import FluidSystem
@@ -78,14 +78,17 @@ def rigid_acceleration(x, v, m, force, gravity):
 
 @dataclasses.dataclass(frozen=True)
 class RigidSystem:
-    """A rigid body (kind ``RIGID``, 2D); its density is ``Params.solid_density``.
+    """A rigid body (kind ``RIGID``, 2D); its density is ``Params.solid_density``, its
+    wall contact's spring, dashpots and friction ``Params.contact_frequency``,
+    ``contact_damping_ratio`` and ``contact_friction``.
 
     Attributes:
       boundary: :class:`~sphjax.SolidBoundary`, how a fluid sees the body (no-slip or free
         slip; ``acceleration=True`` uses the body's acceleration in the extrapolated
         pressure).
       wall_contact: :class:`~sphjax.WallContact`, the contact force that keeps the body
-        off the walls, or ``None`` (no contact: a body that reaches a wall passes into it).
+        off the walls, or ``None`` (no contact: a body that reaches a wall passes into it;
+        the contact's Params fields are then refused).
     """
 
     boundary: SolidBoundary = SolidBoundary()
@@ -105,20 +108,31 @@ class RigidSystem:
             )
         if self.wall_contact is not None and not isinstance(self.wall_contact, WallContact):
             raise ValueError(
-                "RigidSystem.wall_contact must be WallContact(frequency=...) or None, got "
+                "RigidSystem.wall_contact must be WallContact(distance=...) or None, got "
                 f"{self.wall_contact!r}"
             )
 
     def parameters(self) -> frozenset[str]:
-        """``gravity`` and ``solid_density`` (the body's density)."""
-        return frozenset({"gravity", "solid_density"})
+        """``gravity`` and ``solid_density`` (the body's density); with ``wall_contact``,
+        the contact's fields (:attr:`WallContact.parameters`)."""
+        contact = () if self.wall_contact is None else self.wall_contact.parameters
+        return frozenset({"gravity", "solid_density", *contact})
 
     def unused_parameters(self) -> dict[str, str]:
-        """The elastic solid's fields: a rigid body has none of them."""
+        """The elastic solid's fields (a rigid body has none of them) and, without
+        ``wall_contact``, the contact's."""
+        read = self.parameters()
         return {
-            name: refusal(name, "rigid body", "it does not deform", "use a SolidSystem")
+            name: refusal(
+                name,
+                "rigid body",
+                "it has no wall contact",
+                "give it RigidSystem(wall_contact=WallContact())",
+            )
+            if name in CONTACT_FIELDS
+            else refusal(name, "rigid body", "it does not deform", "use a SolidSystem")
             for name in SOLID_DEFAULTS
-            if name not in self.parameters()
+            if name not in read
         }
 
     def replace(self, **changes) -> RigidSystem:
@@ -164,4 +178,4 @@ class RigidSystem:
         own: the fluid's acoustic limit covers it (``v_max`` enters the fluid's)."""
         if self.wall_contact is None:
             return []
-        return [self.wall_contact.time_step_limit()]
+        return [self.wall_contact.time_step_limit(params)]

@@ -32,7 +32,7 @@ from typing import Any
 
 import jax.numpy as jnp
 
-from sphjax.core.params import SOLID_DEFAULTS, fields_read, refusal
+from sphjax.core.params import CONTACT_FIELDS, SOLID_DEFAULTS, fields_read, refusal
 from sphjax.core.space import displacement_fn
 from sphjax.core.state import Kind
 from sphjax.physics import fsi
@@ -114,6 +114,11 @@ class SolidSystem:
     def unused_parameters(self) -> dict[str, str]:
         """``{field: refusal}`` for the solid fields this solid does not read."""
         hints = {"penalty_alpha": ("no penalty force", "give the solid penalty=PenaltyForce()")}
+        contact = (
+            "an elastic solid has no wall contact",
+            "give a rigid body RigidSystem(wall_contact=WallContact())",
+        )
+        hints.update(dict.fromkeys(CONTACT_FIELDS, contact))
         generic = ("its choices do not read it", "choose one that does")
         read = self.parameters()
         return {
