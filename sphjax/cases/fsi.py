@@ -546,7 +546,9 @@ def elastic_gate_dam_break(
     ``outflow_length`` to the right of the gate, where the water escapes as the gate
     bends.  The water that passes under the gate runs along it at about 1 m/s; its front
     is 0.2 m past the gate at t = 0.247 s and 0.29 m past it at t = 0.4 s (0.34 m in plane
-    stress, below), so the default 0.4 m keeps it on the floor to ``t_end``.  On a floor
+    stress, below), so the default 0.4 m keeps it on the floor to ``t_end`` at 2 and 3
+    particles through the gate; a finer gate opens further sooner (at 4 through the front
+    leaves a 0.4 m floor at t = 0.364 s: give it ``outflow_length=0.6``).  On a floor
     shorter than the front's run it falls off the end and leaves the domain, which stops
     the run (:class:`sphjax.SimulationError`).  Gate: ``E = 12 MPa``, ``nu = 0.4``,
     ``rho_s = 1100`` (the values vary across the literature: E 7.8-12 MPa, nu 0.4-0.47);
