@@ -8,6 +8,8 @@ creeping back.  Timings are ``benchmarks/startup.py``'s business, not a test's.
 
 from __future__ import annotations
 
+import contextlib
+
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -19,6 +21,22 @@ from sphjax.core.neighbors import DENSE_SEARCH_PAIRS, points_within
 
 # lowered once per program this process compiles (or loads from the persistent cache)
 COMPILE_EVENT = "/jax/core/compile/jaxpr_to_mlir_module_duration"
+
+
+@contextlib.contextmanager
+def compiled_programs():
+    """A list that collects one entry per program compiled inside the ``with`` block."""
+    compiled = []
+
+    def listen(event, duration, **_):
+        if event == COMPILE_EVENT:
+            compiled.append(duration)
+
+    jax.monitoring.register_event_duration_secs_listener(listen)
+    try:
+        yield compiled
+    finally:
+        jax.monitoring.unregister_event_duration_listener(listen)
 
 
 def _brute_force(x, radius, box, closed):
@@ -76,19 +94,10 @@ def test_quick_start_compiles_no_set_up_operations():
     computes when it builds its neighbour-list functions (five operations in float32
     sessions, seven in float64 ones like this), the allocation's rebuild and the chunk of
     steps (fewer if this process compiled one of them before).  Before issue 30: 75."""
-    compiled = []
-
-    def listen(event, duration, **_):
-        if event == COMPILE_EVENT:
-            compiled.append(duration)
-
-    jax.monitoring.register_event_duration_secs_listener(listen)
-    try:
+    with compiled_programs() as compiled:
         case = sphjax.cases.taylor_green(n=20)
         traj = sphjax.simulate(case, n_steps=2, save_every=1)
         np.asarray(traj.states.position)
-    finally:
-        jax.monitoring.unregister_event_duration_listener(listen)
     assert len(traj) == 3
     assert 0 < len(compiled) <= 11, len(compiled)
 
@@ -122,19 +131,10 @@ def test_a_run_compiles_one_chunk_program():
     arguments).  Before: one program per chunk length and per frame spacing, three here.
     The frames are those of one chunk per frame (the same run in chunks of 7 steps)."""
     case = sphjax.cases.taylor_green(n=10)
-    compiled = []
-
-    def listen(event, duration, **_):
-        if event == COMPILE_EVENT:
-            compiled.append(duration)
-
     sphjax.simulate(case, n_steps=3, save_every=3, steps_per_chunk=3)  # warm: set-up
-    jax.monitoring.register_event_duration_secs_listener(listen)
-    try:
+    with compiled_programs() as compiled:
         # 50 steps, a frame every 7: chunks of 4, 3 frames (28 + 21 steps), then 1 step
         traj = sphjax.simulate(case, n_steps=50, save_every=7, steps_per_chunk=28)
-    finally:
-        jax.monitoring.unregister_event_duration_listener(listen)
     assert len(compiled) <= 1, len(compiled)
     np.testing.assert_allclose(np.asarray(traj.times) / case.dt, [0, *range(7, 50, 7), 50])
     reference = sphjax.simulate(case, n_steps=50, save_every=7, steps_per_chunk=7)
@@ -149,18 +149,9 @@ def test_a_concrete_evaluate_is_one_program():
     the right-hand side traced into a caller's program, whose derivative it keeps."""
     case = sphjax.cases.dam_break(n=6)
     neighbors = sphjax.build_neighbors(case.state, case.model)
-    compiled = []
-
-    def listen(event, duration, **_):
-        if event == COMPILE_EVENT:
-            compiled.append(duration)
-
-    jax.monitoring.register_event_duration_secs_listener(listen)
-    try:
+    with compiled_programs() as compiled:
         rates = sphjax.evaluate(case.state, neighbors, case.model, case.params)
         np.asarray(rates.acceleration)
-    finally:
-        jax.monitoring.unregister_event_duration_listener(listen)
     assert len(compiled) <= 1, len(compiled)
 
     def traced(params):
