@@ -26,6 +26,13 @@ def inside_trace() -> bool:
     return isinstance(jax.device_put(np.int32(0)), jax.core.Tracer)
 
 
+def concrete_call(*trees) -> bool:
+    """Whether a function called with ``trees`` runs on concrete arrays outside any trace:
+    then a public pure function (``evaluate``, ``kick_drift_kick``) runs as one compiled
+    program rather than operation by operation."""
+    return not is_traced(*trees) and not inside_trace()
+
+
 def device_array(value, dtype=None) -> jax.Array:
     """``jnp.asarray(value, dtype)`` without compiling: a concrete ``value`` goes through
     numpy and one transfer; a traced one (or a list holding a Tracer) to ``jnp.asarray``.

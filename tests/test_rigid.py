@@ -256,6 +256,8 @@ def test_bodies_that_sink_or_float_are_refused_by_the_other_case():
         sinking_body(n=4).params.replace(contact_frequency=-1.0)
     with pytest.raises(ValueError, match=r"^WallContact takes only distance=.*contact_frequency"):
         sphjax.WallContact(frequency=800.0)  # a Params field now
+    with pytest.raises(TypeError, match=r"^WallContact got an unexpected keyword 'distanc'"):
+        sphjax.WallContact(distanc=2.0)  # a typo is not called a moved Params field
     with pytest.raises(ValueError, match=r"^WallContact.distance must be a number > 1, got 0.5"):
         sphjax.WallContact(distance=0.5)
     with pytest.raises(ValueError, match=r"^RigidSystem.wall_contact must be WallContact"):

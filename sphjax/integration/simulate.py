@@ -26,7 +26,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from sphjax._host import device_array, inside_trace
+from sphjax._host import concrete_call, device_array, inside_trace
 from sphjax._linear_call import refuse_second_order
 from sphjax._text import show
 from sphjax.core import ordering
@@ -113,7 +113,7 @@ def kick_drift_kick(state: State, neighbors: Neighbors, dt, model: Model, params
     step runs as one compiled program (kept per model and shapes), so that a loop of steps
     written in Python does not run each step operation by operation.
     """
-    if not _is_traced(state, neighbors, dt, params) and not inside_trace():
+    if concrete_call(state, neighbors, dt, params):
         return _step_compiled(state, neighbors, dt, params, model=model)
     return stepper_for(model).step((state, neighbors), dt, params)
 

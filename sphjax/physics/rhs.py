@@ -29,7 +29,7 @@ import jax.numpy as jnp
 import numpy as np
 from jax.ad_checkpoint import checkpoint_name
 
-from sphjax._host import inside_trace, is_traced
+from sphjax._host import concrete_call, is_traced
 from sphjax.core.neighbors import (
     NeighborSearch,
     capacity,
@@ -593,7 +593,7 @@ def evaluate(state: State, neighbors: Neighbors, model, params, density_step=Non
     operation (some 450 small programs, about 20 s on two CPU cores, for a rigid body in
     a tank); inside a trace it is part of the caller's program.
     """
-    if not is_traced(state, neighbors, params, density_step) and not inside_trace():
+    if concrete_call(state, neighbors, params, density_step):
         return _evaluate_compiled(state, neighbors, params, density_step, model=model)
     return _evaluate(state, neighbors, model, params, density_step)
 

@@ -94,8 +94,14 @@ class WallContact:
     parameters = ("contact_frequency", "contact_damping_ratio", "contact_friction")
 
     def __init__(self, *args, distance: float = 1.5, **moved):
+        unknown = sorted(set(moved) - set(_MOVED))
+        if unknown:
+            raise TypeError(
+                f"WallContact got an unexpected keyword {unknown[0]!r}: it takes only "
+                "distance= (the contact distance in particle spacings)"
+            )
         if args or moved:
-            names = [_MOVED.get(name, name) for name in moved] or ["contact_frequency"]
+            names = [_MOVED[name] for name in moved] or ["contact_frequency"]
             raise ValueError(
                 f"WallContact takes only distance= (the contact distance in spacings); its "
                 f"spring and friction are Params fields ({', '.join(names)}): set them with "
