@@ -433,6 +433,23 @@ BAD_INPUT = [
         None,
     ),  # fmt: skip
     (
+        [
+            "dataset",
+            "taylor_green",
+            "--out",
+            "d",
+            "--steps",
+            "8",
+            "--vary",
+            "sound_speed=0:10",
+            "--case-arg",
+            "n=8",
+        ],
+        "--vary: sound_speed=0:10: Params.sound_speed must be a positive number, got 0.0; "
+        "give a range of valid values",
+        None,
+    ),  # fmt: skip
+    (
         ["dataset", "taylor_green", "--out", "d", "--steps", "8", "--vary", "nu=1"],
         "argument --vary: nu: must look like LO:HI",
         None,

@@ -144,6 +144,18 @@ def test_bad_arguments_are_named():
         generate_dataset(
             case, "/nonexistent", n_train=1, n_valid=0, n_test=0, steps=5, write_every=2
         )
+    # a range with an end the field cannot take: named before any draw or time step
+    with pytest.raises(ValueError, match=r"vary: sound_speed=0:10: Params.sound_speed must"):
+        generate_dataset(
+            case,
+            "/nonexistent",
+            n_train=1,
+            n_valid=0,
+            n_test=0,
+            steps=4,
+            write_every=2,
+            vary={"sound_speed": (0.0, 10.0)},
+        )
 
 
 def test_an_existing_dataset_folder_is_not_replaced(tmp_path, monkeypatch):
@@ -319,6 +331,60 @@ def test_ensemble_time_step_bounds_every_draw(which):
         assert dt <= min(steps)
     # the corner with the largest sound speed sets it: the rule is not the case's own step
     assert dt < stable_time_step(case.state, case.model, case.params)
+
+
+def _worst_end_step(case, perturbation, vary, reseed):
+    """The fluid's stable step at the worst end of every range, from the formula (Morris,
+    Fox & Zhu 1997): ``min(0.25 h / (c0_hi + V), 0.125 h^2 / nu_hi, 0.25 sqrt(h / |g|))``,
+    ``V = (a_hi U + f U')`` times 1.1 if the case seed is redrawn; with the limits apart."""
+    from sphjax.core.state import Kind
+
+    h = case.model.smoothing_length
+    fluid = np.asarray(case.state.kind) == Kind.FLUID
+    peak = np.linalg.norm(np.asarray(case.state.velocity, np.float64)[fluid], axis=1).max()
+    top = {name: hi for name, (lo, hi) in vary.items()}
+    a_hi, f = perturbation.amplitude[1], perturbation.fourier
+    speed = (a_hi * peak + f * (peak if peak > 0 else 1.0)) * (1.1 if reseed else 1.0)
+    c0 = top.get("sound_speed", float(case.params.sound_speed))
+    limits = {"acoustic": 0.25 * h / (c0 + speed)}
+    if "kinematic_viscosity" in case.params.used:
+        nu = top.get("kinematic_viscosity", float(case.params.kinematic_viscosity))
+        limits["viscous"] = 0.125 * h**2 / nu
+    g = float(np.linalg.norm(np.asarray(case.params.gravity)))
+    if g > 0:
+        limits["body force"] = 0.25 * np.sqrt(h / g)
+    return limits
+
+
+@pytest.mark.parametrize("binding", ["acoustic", "viscous", "body force"])
+def test_ensemble_time_step_is_the_stable_step_at_the_worst_end(binding):
+    """The rule's step equals the stable step at the worst end of the ranges (the largest
+    sound speed, the largest viscosity, the fastest start), computed here from the formula,
+    for a range that makes each fluid limit the binding one; where the ranges set it
+    (acoustic, viscous) it is smaller than the same formula at their low end, so their top
+    is what sets it (no simulation, < 1 s)."""
+    import sphjax
+    from sphjax.dataset import Perturbation, ensemble_time_step
+
+    if binding == "body force":  # dam break at rest (no case seed), c0 + V < sqrt(g h)
+        case, kwargs = sphjax.cases.dam_break(n=4), {"n": 4}
+        p = Perturbation((1.0, 1.0), 0.1, 2)
+        vary = {"sound_speed": (0.4, 0.8)}
+        reseed = False
+    else:  # Taylor-Green, case seed redrawn per trajectory
+        case, kwargs = sphjax.cases.taylor_green(n=8), {"n": 8}
+        p = Perturbation((0.7, 1.1), 0.2, 2)
+        nu_top = 0.015 if binding == "acoustic" else 2.0
+        vary = {"kinematic_viscosity": (0.0075, nu_top), "sound_speed": (8.0, 12.0)}
+        reseed = True
+    limits = _worst_end_step(case, p, vary, reseed)
+    assert min(limits, key=limits.get) == binding, limits  # the set-up tests what it says
+    dt = ensemble_time_step(case, p, vary, kwargs)
+    # the same numbers in another order of operations: round-off only
+    assert dt == pytest.approx(min(limits.values()), rel=1e-12)
+    low = {name: (lo, lo) for name, (lo, _) in vary.items()}
+    if binding != "body force":
+        assert dt < min(_worst_end_step(case, p, low, reseed).values())
 
 
 def test_dam_break_dataset_walls_and_free_surface(tmp_path):

@@ -87,6 +87,52 @@ def test_the_documented_command_writes_the_documented_metadata(tmp_path):
             assert meta[key] == want, key
 
 
+def test_the_documented_command_writes_one_dt_for_every_seed(tmp_path):
+    """Issue 32: the documented command with its ``--seed`` and with another writes the
+    same ``dt``, and that ``dt`` is the stable step at the worst end of the documented
+    ranges (``--amplitude`` top, ``--fourier``, the redrawn case seed's 1.1, the
+    ``--vary`` viscosity's top), from the formula here (at ``n = 8``, one trajectory of
+    two frames' worth of steps: ~5 s)."""
+    import numpy as np
+
+    import sphjax
+    from sphjax.cli import main
+
+    documented = _script().dataset_argv("DIR")
+    assert _option(documented, "--seed") == "1"
+    dts = {}
+    for seed in ("1", "7"):
+        argv = list(documented)
+        every = int(_option(argv, "--write-every"))
+        for name, value in (
+            ("--out", str(tmp_path / f"seed{seed}")),
+            ("--case-arg", "n=8"),
+            ("--n-train", "1"),
+            ("--n-valid", "0"),
+            ("--n-test", "0"),
+            ("--steps", str(2 * every)),
+            ("--seed", seed),
+        ):
+            argv[argv.index(name) + 1] = value
+        assert main([*argv, "--no-progress"]) == 0
+        meta = json.loads((tmp_path / f"seed{seed}" / "metadata.json").read_text())
+        assert meta["seed"] == int(seed)
+        dts[seed] = meta["dt"]
+    assert dts["1"] == dts["7"]
+    # the formula at the worst end of the documented ranges
+    a_hi = float(_option(documented, "--amplitude").split(":")[1])
+    fourier = float(_option(documented, "--fourier"))
+    name, span = _option(documented, "--vary").split("=")
+    assert name == "kinematic_viscosity"
+    nu_hi = float(span.split(":")[1])
+    case = sphjax.cases.taylor_green(n=8)
+    h, c0 = case.model.smoothing_length, float(case.params.sound_speed)
+    peak = float(np.linalg.norm(np.asarray(case.state.velocity, np.float64), axis=1).max())
+    fastest = 1.1 * (a_hi + fourier) * peak  # the case seed is redrawn: 1.1
+    expected = min(0.25 * h / (c0 + fastest), 0.125 * h**2 / nu_hi)
+    assert dts["1"] == pytest.approx(expected, rel=1e-12)
+
+
 def test_the_shipped_model_was_trained_on_the_documented_dataset():
     # docs/models/tg32_gns.eqx must come from the reproduce command (today's defaults)
     from sphjax.surrogate import LearnedSimulator

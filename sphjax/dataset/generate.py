@@ -70,8 +70,14 @@ def ensemble_time_step(
     faster), times :data:`RESEED_SPEED_MARGIN` if every trajectory rebuilds the case with
     its own seed, with the Params of each of the ``2^k`` corners of the ``k`` ranges in
     ``vary``.  Every limit (acoustic ``CFL h / (c0 + |v|)``, viscous ``0.125 h^2 / nu``,
-    body force ``0.25 sqrt(h / |g|)``, solid ``CFL h / (c_s + |v|)``) is monotone in
-    each Params field it reads, so the smallest corner bounds every draw from the box.
+    body force ``0.25 sqrt(h / |g|)``: Morris, Fox & Zhu 1997, J. Comput. Phys. 136;
+    solid ``CFL h / (c_s + |v|)``, ``c_s = sqrt(E / (d (1 - 2 nu) rho0))``) is monotone in
+    each Params field it reads, so the smallest corner bounds every draw from the box.  For
+    a fluid that is the worst end of each range:
+
+        dt = min(0.25 h / (c0_hi + V), 0.125 h^2 / nu_hi, 0.25 sqrt(h / |g|))
+
+    with ``V`` the speed bound above.
 
     Only the given case and the ranges are read, never a draw: the same arguments with any
     ``seed`` give the same step.  :func:`generate_dataset` still checks every trajectory

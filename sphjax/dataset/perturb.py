@@ -21,7 +21,7 @@ import numpy as np
 
 from sphjax import cases as cases_module
 from sphjax.core.case import Case
-from sphjax.core.params import Params
+from sphjax.core.params import Params, check_value
 from sphjax.core.state import Kind, State
 
 SPLITS = ("train", "valid", "test")
@@ -252,7 +252,10 @@ def sample_params(
 
 
 def check_vary(params: Params, vary: Mapping[str, tuple[float, float]]) -> dict:
-    """Validate ``vary``: scalar Params fields the model reads, with ``lo <= hi``."""
+    """Validate ``vary``: scalar Params fields the model reads, with ``lo <= hi`` and both
+    ends valid values of the field (:func:`~sphjax.core.params.check_value`: the ends are
+    what :func:`~sphjax.dataset.generate.ensemble_time_step` evaluates, and every draw lies
+    between them)."""
     scalar = [name for name, value in params.items() if np.ndim(value) == 0]
     used = [name for name, value in params.items(used_only=True) if np.ndim(value) == 0]
     out = {}
@@ -264,7 +267,14 @@ def check_vary(params: Params, vary: Mapping[str, tuple[float, float]]) -> dict:
         params.check_used(name)
         lo, hi = (float(v) for v in rng)
         if not lo <= hi:
-            raise ValueError(f"vary: {name}={lo}:{hi} needs lo <= hi")
+            raise ValueError(f"vary: {name}={lo:g}:{hi:g} needs lo <= hi")
+        for end in (lo, hi):
+            try:
+                check_value(name, end)
+            except ValueError as error:
+                raise ValueError(
+                    f"vary: {name}={lo:g}:{hi:g}: {error}; give a range of valid values"
+                ) from None
         out[name] = (lo, hi)
     return out
 
