@@ -26,6 +26,20 @@ def inside_trace() -> bool:
     return isinstance(jax.device_put(np.int32(0)), jax.core.Tracer)
 
 
+def outside_traces():
+    """A context in which JAX computes as it does outside every trace, even inside an
+    outer ``jit`` or ``jax.grad``: operations on concrete arrays run now and jitted
+    functions run compiled (set-up that needs concrete values: a neighbour allocation).
+
+    Unlike ``jax.ensure_compile_time_eval()`` it does not fold constants into programs
+    traced meanwhile: lowered there, a neighbour rebuild computed its shape-only arrays
+    (cell indices, ``arange(N)``) eagerly and captured them as constants of the program,
+    and so did the traced run behind it (a ``[N, K]`` list and positions; 2.9 GB at one
+    million particles).  Operations on a Tracer of an enclosing trace are not allowed
+    inside it."""
+    return jax.core.eval_context()
+
+
 def concrete_call(*trees) -> bool:
     """Whether a function called with ``trees`` runs on concrete arrays outside any trace:
     then a public pure function (``evaluate``, ``kick_drift_kick``) runs as one compiled

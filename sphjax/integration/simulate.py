@@ -26,7 +26,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from sphjax._host import concrete_call, device_array, inside_trace
+from sphjax._host import concrete_call, device_array, inside_trace, outside_traces
 from sphjax._linear_call import refuse_second_order
 from sphjax._text import show
 from sphjax.core import ordering
@@ -339,11 +339,10 @@ _run_chunk = jax.jit(_run_chunk_checked, static_argnames=("model",), donate_argn
 
 
 def _concrete(traced: bool):
-    """``jax.ensure_compile_time_eval()`` inside a trace (``traced`` inputs or an outer
-    ``jit``), where the set-up must stay concrete; outside one a no-op: compile-time
-    evaluation would run the compiled set-up programs op by op, compiling each op."""
+    """:func:`~sphjax._host.outside_traces` inside a trace (``traced`` inputs or an outer
+    ``jit``), where the set-up must stay concrete; outside one a no-op."""
     inside = traced or inside_trace()
-    return jax.ensure_compile_time_eval() if inside else contextlib.nullcontext()
+    return outside_traces() if inside else contextlib.nullcontext()
 
 
 def _is_traced(*trees) -> bool:
@@ -564,14 +563,12 @@ def simulate(
     if traced:
         if model.pair_adjoint:
             refuse_second_order(params, state, dt)
-        run = functools.partial(_simulate_traced, checkpoint_every=checkpoint_every, order=order)
-        if not inside_trace():  # under an outer jit the run is part of its program already
-            run = functools.partial(
-                _simulate_compiled,
-                checkpoint_every=checkpoint_every,
-                order=order,
-                max_stored=MAX_STORED_CHUNKS,
-            )
+        run = functools.partial(
+            _simulate_compiled,
+            checkpoint_every=checkpoint_every,
+            order=order,
+            max_stored=MAX_STORED_CHUNKS,
+        )
     else:
         run = functools.partial(
             _simulate_in_chunks,
@@ -581,6 +578,8 @@ def simulate(
             order=order,
         )
     if traced:
+        if inside_trace():
+            neighbors = _rebuilt_as_zeros(neighbors, model)
         states = _raising_what_the_run_raised(run, state, neighbors, dt, params, model, segments)
     else:
         states = run(state, neighbors, dt, params, model, segments=segments)
@@ -625,10 +624,42 @@ def _simulate_compiled(
     )
 
 
+def _rebuilt_as_zeros(neighbors: Neighbors, model) -> Neighbors:
+    """``neighbors`` with the arrays that the traced run's forced rebuild overwrites (the
+    searched list and its reference positions, the lists split from it, their support
+    level and its origin) replaced by zeros made in the enclosing trace.  Inside an outer
+    ``jit`` the allocation's concrete lists would otherwise be constants of its program
+    (``[N, K]`` integers: 7 MB at 40,000 particles, hundreds of MB at a million).  Zero
+    reference positions make jax-md's rebuild see every particle as moved."""
+    if neighbors.search is None:
+        return neighbors
+    fixed, rest = _split_fixed(neighbors, model)
+
+    def zeros(tree):
+        return jax.tree_util.tree_map(jnp.zeros_like, tree)
+
+    search = rest.search
+    rest = rest.replace(
+        search=search.set(
+            idx=zeros(search.idx), reference_position=zeros(search.reference_position)
+        ),
+        pairs=zeros(rest.pairs),
+        skin=zeros(rest.skin),
+        support_origin=zeros(rest.support_origin),
+    )
+    return rest if fixed is None else _join_fixed(rest, fixed)
+
+
 def _simulate_traced(state, neighbors, dt, params, model, *, segments, checkpoint_every, order):
     """One ``lax.scan`` per segment of equal frames (under grad/jit/vmap); overflow and
     instability are raised from inside the computation.  Returns the frames, the initial
-    one first."""
+    one first.
+
+    The run starts behind an optimisation barrier: where the initial state is a constant
+    of an enclosing program (a loss that closes over the case), XLA would otherwise
+    evaluate the first neighbour rebuild and evaluation while compiling (constant
+    folding: a sort of every particle, seconds at 40,000 particles)."""
+    state, neighbors = jax.lax.optimization_barrier((state, neighbors))
     neighbors = update_neighbors(state.position, neighbors, model, rebuild=True)
     state, neighbors = stepper_for(model).init((state, neighbors), params)
     # what no step changes (a solid's reference list and quantities) stays out of the
