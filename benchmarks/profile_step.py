@@ -31,9 +31,11 @@ import jax
 import jax.numpy as jnp
 
 import sphjax
-from sphjax.integration.simulate import build_neighbors, kick_drift_kick
+from sphjax.integration.simulate import kick_drift_kick
+from sphjax.neighbors import update_neighbors
 from sphjax.physics import rhs
 from sphjax.physics.pairs import Geometry
+from sphjax.physics.rhs import build_neighbors
 
 
 def make_case(name: str, n: int):
@@ -86,7 +88,7 @@ def profile(name: str, n: int, steps: int, repeat: int) -> dict:
 
     @jax.jit
     def rebuild(position, neighbors):
-        return rhs.update_neighbors(position, neighbors, model, rebuild=True)
+        return update_neighbors(position, neighbors, rebuild=True)
 
     out["rebuild"] = timed(rebuild, state.position, neighbors, repeat=repeat)
 

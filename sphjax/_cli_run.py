@@ -308,7 +308,7 @@ def _one_line_warnings(bar):
     """Show a neighbour-list re-allocation as one line above the progress bar."""
     import warnings
 
-    from sphjax.integration.simulate import NeighborOverflowWarning
+    from sphjax.neighbors import NeighborOverflowWarning
 
     show_default = warnings.showwarning
 
@@ -328,8 +328,9 @@ def run_case(args, out: Path) -> int:
     from tqdm import tqdm
 
     from sphjax._compile import CompileTimer, remember_rate, remembered_rate
-    from sphjax.integration.simulate import NeighborOverflowError, SimulationError, simulate
+    from sphjax.integration.simulate import SimulationError, simulate
     from sphjax.io import TrajectoryWriter
+    from sphjax.neighbors import is_neighbor_overflow
 
     dt, save_every, save_dt = args.dt, args.save_every, args.save_dt
     if is_setup_file(args.case):
@@ -410,7 +411,9 @@ def run_case(args, out: Path) -> int:
                 file=sys.stderr,
             )
             return EXIT_UNSTABLE
-        except NeighborOverflowError as err:
+        except Exception as err:
+            if not is_neighbor_overflow(err):
+                raise
             bar.close()
             writer.set_error(str(err))
             print(

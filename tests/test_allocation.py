@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 import sphjax
-from sphjax.physics.rhs import neighbor_search
+from sphjax.neighbors import SearchGeometry, neighbor_search
 
 CASES = [
     ("taylor_green", dict(n=20)),  # periodic
@@ -30,7 +30,7 @@ def _jax_md_allocation(search, position, extra_capacity=0):
 @pytest.mark.parametrize(("name", "arguments"), CASES, ids=[c for c, _ in CASES])
 def test_allocation_is_jax_mds(name, arguments):
     case = sphjax.cases.get(name, **arguments)
-    search = neighbor_search(case.model)
+    search = neighbor_search(SearchGeometry.of(case.model))
     ours = search.allocate(case.state.position)
     theirs = _jax_md_allocation(search, case.state.position)
     assert np.array_equal(np.asarray(ours.idx), np.asarray(theirs.idx))
@@ -51,7 +51,7 @@ def test_allocation_is_jax_mds(name, arguments):
 def test_extra_capacity_and_float32():
     """(The tests run in float64; the cases' own runs are float32.)"""
     case = sphjax.cases.get("dam_break", n=10)
-    search = neighbor_search(case.model)
+    search = neighbor_search(SearchGeometry.of(case.model))
     ours = search.allocate(case.state.position, extra_capacity=3)
     theirs = _jax_md_allocation(search, case.state.position, extra_capacity=3)
     assert ours.max_occupancy == theirs.max_occupancy and np.array_equal(
@@ -60,7 +60,7 @@ def test_extra_capacity_and_float32():
     jax.config.update("jax_enable_x64", False)  # the autouse fixture restores it
     for name, arguments in CASES[:3]:
         case = sphjax.cases.get(name, **arguments)
-        search = neighbor_search(case.model)
+        search = neighbor_search(SearchGeometry.of(case.model))
         ours = search.allocate(case.state.position)
         theirs = _jax_md_allocation(search, case.state.position)
         assert ours.reference_position.dtype == jnp.float32

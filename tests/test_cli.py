@@ -599,7 +599,7 @@ def test_unstable_run_exits_nonzero_and_keeps_frames(tmp_path, capsys, monkeypat
 
 
 def test_neighbour_overflow_is_one_line(tmp_path, capsys, monkeypatch):
-    from sphjax.integration.simulate import NeighborOverflowWarning
+    from sphjax.neighbors import NeighborOverflowWarning
 
     simulate = sphjax.integration.simulate.simulate
 

@@ -221,15 +221,14 @@ def test_an_overflowing_list_grows_by_a_factor_and_a_floor():
     compilation: a fluid reaching an elastic obstacle took the CI-size obstacle run
     through 8 of them, 64 of its 66 s, when lists grew to their need alone); the lists
     that did not overflow keep what they need."""
-    from sphjax.integration.simulate import _grown
-    from sphjax.physics.rhs import ListSizes
+    from sphjax.neighbors import ListSizes, grown
 
     old = ListSizes(48, {(0, 0): 41, (0, 2): 1, (1, 0): 20}, {(0, 2): 1, (0, 1): 90})
     needed = ListSizes(0, {(0, 0): 48, (0, 2): 5, (1, 0): 19}, {(0, 2): 3, (0, 1): 120})
-    grown = _grown(old, needed)
-    assert grown.widths == {(0, 0): 52, (0, 2): 16, (1, 0): 19}
-    assert grown.members == {(0, 2): 16, (0, 1): 120}
-    assert grown.search == needed.search
+    sizes = grown(old, needed)
+    assert sizes.widths == {(0, 0): 52, (0, 2): 16, (1, 0): 19}
+    assert sizes.members == {(0, 2): 16, (0, 1): 120}
+    assert sizes.search == needed.search
 
 
 @pytest.mark.parametrize("n", [5, 20, 21])

@@ -380,7 +380,7 @@ def test_no_nan_gradients_at_coincident_particles_and_switches():
     assert float(jnp.max(jnp.abs(grads[1][:4]))) > 0  # the special particles do get gradients
 
     # one right-hand-side evaluation: the coincident and switch particles directly
-    from sphjax.integration.simulate import build_neighbors
+    from sphjax.physics.rhs import build_neighbors
 
     neighbors = build_neighbors(state, case.model)
 

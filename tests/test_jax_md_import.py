@@ -9,7 +9,7 @@ import sys
 PROBE = """
 import sys
 import sphjax.cases
-from sphjax.core import neighbors
+from sphjax.neighbors import search as neighbors
 heavy = [m for m in ("jax_md.energy", "jax_md.rigid_body", "jax_md.nn", "e3nn_jax", "flax")
          if m in sys.modules]
 assert not heavy, heavy

@@ -17,15 +17,10 @@ from sphjax.cases import body_bottom, floating_body, sinking_body
 from sphjax.cli import main
 from sphjax.integration.stepper import stepper_for
 from sphjax.io import read_trajectory
+from sphjax.neighbors import reference_pairs
 from sphjax.physics.interactions import rigid_wall
 from sphjax.physics.pairs import Geometry
-from sphjax.physics.rhs import (
-    Context,
-    build_neighbors,
-    reference_pairs,
-    update_stage,
-    with_reference,
-)
+from sphjax.physics.rhs import Context, build_neighbors, update_stage, with_reference
 from sphjax.physics.rigid.system import rigid_acceleration, rigid_motion
 
 

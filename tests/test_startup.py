@@ -17,7 +17,7 @@ import pytest
 
 import sphjax
 from sphjax.cases._packing import periodic_neighbours
-from sphjax.core.neighbors import DENSE_SEARCH_PAIRS, points_within
+from sphjax.neighbors.search import DENSE_SEARCH_PAIRS, points_within
 
 # lowered once per program this process compiles (or loads from the persistent cache)
 COMPILE_EVENT = "/jax/core/compile/jaxpr_to_mlir_module_duration"
@@ -70,7 +70,7 @@ def test_points_within_both_paths_match_brute_force(dim, periodic, monkeypatch):
     args = (x, radius, (0.0,) * dim, (box,) * dim, (periodic,) * dim)
     assert 300**2 <= DENSE_SEARCH_PAIRS
     np.testing.assert_array_equal(points_within(*args), expected)
-    monkeypatch.setattr("sphjax.core.neighbors.DENSE_SEARCH_PAIRS", 0)  # the cell list
+    monkeypatch.setattr("sphjax.neighbors.search.DENSE_SEARCH_PAIRS", 0)  # the cell list
     np.testing.assert_array_equal(points_within(*args), expected)
 
 

@@ -49,7 +49,7 @@ def test_a_loop_over_the_stepper_is_simulate(make):
 def test_a_traced_overflow_is_recognised_through_jaxs_wrapping():
     """Inside ``jit`` the lists cannot be re-allocated: the run raises, and whoever catches
     it (the dataset runner re-allocates) recognises the overflow by one rule."""
-    from sphjax.integration.simulate import NeighborOverflowError, is_neighbor_overflow
+    from sphjax.neighbors import NeighborOverflowError, is_neighbor_overflow
 
     case = cases.dam_break(n=8)
 

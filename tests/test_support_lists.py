@@ -1,5 +1,5 @@
 """Two-level neighbour lists: the support lists compacted from the Verlet lists
-(``sphjax.core.neighbors.support_list``, ``Neighbors.support_capacities``) change no
+(``sphjax.neighbors.search.support_list``, ``Neighbors.support_capacities``) change no
 result, only how many pair slots every pair sum runs over."""
 
 from __future__ import annotations
@@ -11,7 +11,7 @@ import jax.numpy as jnp
 import numpy as np
 
 import sphjax
-from sphjax.core.neighbors import support_list
+from sphjax.neighbors.search import support_list
 from sphjax.physics.rhs import build_neighbors, evaluate
 
 
@@ -48,7 +48,7 @@ def test_support_lists_follow_the_particles_between_rebuilds():
     half their own skin and compacted again from the Verlet list after that; either way the
     rates equal those over the Verlet list alone.  (Every gradient test runs through them:
     traced runs keep their fluid lists at two levels.)"""
-    from sphjax.physics.rhs import SUPPORT_SKIN, update_neighbors
+    from sphjax.neighbors import SUPPORT_SKIN, update_neighbors
 
     case = sphjax.cases.dam_break(n=6)
     model, state = case.model, case.state
@@ -56,7 +56,7 @@ def test_support_lists_follow_the_particles_between_rebuilds():
     one = build_neighbors(state, model, support=False)
     (key, width), *_ = two.support_capacities
     assert width < one.pairs[key].idx.shape[1]  # narrower than the Verlet list
-    update = jax.jit(functools.partial(update_neighbors, model=model))
+    update = jax.jit(update_neighbors)
     rates = jax.jit(functools.partial(evaluate, model=model, params=case.params))
     fluid = np.asarray(state.kind) == 0
     direction = np.random.default_rng(1).normal(size=state.position.shape)

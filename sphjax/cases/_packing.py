@@ -32,7 +32,7 @@ import numpy as np
 
 from sphjax import kernels
 from sphjax._host import device_array
-from sphjax.core.neighbors import points_within
+from sphjax.neighbors.search import points_within
 
 
 def periodic_neighbours(x, box: float, radius: float) -> np.ndarray:

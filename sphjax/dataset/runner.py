@@ -3,7 +3,8 @@
 A batch of trajectories runs as ``jax.jit(jax.vmap(simulate-one))``, padded to a fixed
 batch size so it compiles once; with more than one JAX device the batch is placed with
 ``NamedSharding(Mesh(devices, ("batch",)), P("batch"))``.  A neighbour-list overflow
-inside the compiled batch raises ``Model.neighbor_capacity`` by 1.5x and repeats.
+inside the compiled batch raises ``Model.neighbor_capacity``
+(:func:`sphjax.neighbors.capacity.grown_multiplier`) and repeats.
 """
 
 from __future__ import annotations
@@ -15,7 +16,8 @@ import numpy as np
 from sphjax.core.case import Case
 from sphjax.core.params import Params
 from sphjax.core.state import State
-from sphjax.integration.simulate import is_neighbor_overflow, simulate
+from sphjax.integration.simulate import simulate
+from sphjax.neighbors import grown_multiplier, is_neighbor_overflow
 
 
 class Runner:
@@ -64,7 +66,7 @@ class Runner:
                     raise
                 model = self.case.model
                 self.case = self.case.replace(
-                    model=model.replace(neighbor_capacity=1.5 * model.neighbor_capacity)
+                    model=model.replace(neighbor_capacity=grown_multiplier(model.neighbor_capacity))
                 )
                 self._compile()
         else:

@@ -11,9 +11,9 @@ import jax.numpy as jnp
 
 from sphjax.core.pytree import pytree_dataclass
 from sphjax.core.state import State
-from sphjax.integration.simulate import NeighborOverflowError
 from sphjax.integration.step import held_in_place
-from sphjax.physics.rhs import Neighbors, evaluate, overflowed, update_neighbors
+from sphjax.neighbors import Neighbors, overflow_message, overflowed, update_neighbors
+from sphjax.physics.rhs import evaluate
 
 Array = jax.Array
 
@@ -57,11 +57,7 @@ class SPHArgs:
     shift_acceleration: Array | None = None
 
 
-_OVERFLOW_MESSAGE = (
-    f"{NeighborOverflowError.MARK} inside the diffrax vector field, where it cannot be "
-    "re-allocated; raise Model.neighbor_capacity (e.g. "
-    "case.replace(model=case.model.replace(neighbor_capacity=2.0)))"
-)
+_OVERFLOW_MESSAGE = overflow_message("inside the diffrax vector field")
 
 
 class SPHTerm(diffrax.AbstractTerm):
@@ -79,7 +75,7 @@ class SPHTerm(diffrax.AbstractTerm):
         if args.shift_acceleration is not None:
             state = state.replace(shift_acceleration=args.shift_acceleration)
         # no Verlet skin inside a vector field: rebuild at the current positions
-        neighbors = update_neighbors(y.position, args.neighbors, self.model, rebuild=True)
+        neighbors = update_neighbors(y.position, args.neighbors, rebuild=True)
         state = evaluate(state, neighbors, self.model, args.params, args.density_step)
         # walls and unmoved clamps stay put (their velocity is not a drift)
         velocity = jnp.where(held_in_place(state.kind, self.model), 0.0, state.velocity)

@@ -36,18 +36,26 @@ from sphjax.core.params import Params
 from sphjax.core.state import State, Trajectory
 from sphjax.integration.stepper import stepper_for
 from sphjax.integration.timestep import check_time_step
-from sphjax.physics.rhs import (
+from sphjax.neighbors import (
     NEIGHBOR_IDX,
-    UPDATE_FIELDS,
+    NEIGHBOR_MARGIN,
     ListSizes,
+    NeighborOverflowError,
+    NeighborOverflowWarning,
     Neighbors,
-    build_neighbors,
-    check_params,
+    grown,
     list_sizes,
+    needed_sizes,
+    overflow_message,
     overflowed,
-    system_blocks,
     update_neighbors,
     widest,
+)
+from sphjax.physics.rhs import (
+    UPDATE_FIELDS,
+    build_neighbors,
+    check_params,
+    system_blocks,
     with_reference,
 )
 
@@ -59,37 +67,6 @@ class SimulationError(RuntimeError):
         super().__init__(message)
         self.step, self.particle, self.time = step, particle, time
 
-
-class NeighborOverflowError(RuntimeError):
-    """The neighbour list ran out of room where it cannot be re-allocated.
-
-    Raised from inside a compiled run (a traced ``simulate``, the diffrax term) it reaches
-    the caller wrapped in JAX's runtime error, its type lost: :func:`is_neighbor_overflow`
-    recognises it either way, by its message's :attr:`MARK`."""
-
-    #: the words every neighbour-overflow message contains
-    MARK = "the neighbour list overflowed"
-
-
-def is_neighbor_overflow(error: BaseException) -> bool:
-    """Whether ``error`` is a neighbour-list overflow, raised here or from inside a
-    compiled computation (where JAX re-raises it as its own runtime error)."""
-    return isinstance(error, NeighborOverflowError) or NeighborOverflowError.MARK in str(error)
-
-
-class NeighborOverflowWarning(UserWarning):
-    """A concrete run's neighbour list overflowed and was re-allocated (the chunk is
-    repeated with wider lists, a new compilation); the results are unaffected."""
-
-
-#: room above the largest neighbour count in the lists of a concrete (chunked) run, which
-#: re-allocates on overflow; traced runs (grad, jit) cannot and keep
-#: ``Model.neighbor_capacity``
-NEIGHBOR_MARGIN = 0.05
-#: a list that overflows in the chunked driver grows to at least this factor times its
-#: old size, and to at least ``OVERFLOW_MIN_SIZE`` slots (rows) (:func:`_grown`)
-OVERFLOW_GROWTH = 1.25
-OVERFLOW_MIN_SIZE = 16
 
 #: the most chunk carries (``checkpoint_every``) one level of reverse mode stores; runs
 #: (and frames) with more chunks are checkpointed in groups of chunks (frames) too
@@ -133,13 +110,11 @@ def unhealthy(state: State, model: Model):
     return ~finite | outside
 
 
-def _split_fixed(neighbors: Neighbors, model: Model):
+def _split_fixed(neighbors: Neighbors):
     """``(fixed, rest)``: the part of ``neighbors`` that no step changes (the solids'
     reference quantities and their reference-configuration lists), or ``None``, and the
     rest."""
-    keys = [
-        k for k in neighbors.pairs if k[0] == k[1] and not model.systems[k[0]].current_configuration
-    ]
+    keys = [k for k in neighbors.pairs if k[0] == k[1] and not neighbors.plan.current[k[0]]]
     if neighbors.reference is None and not keys:
         return None, neighbors
     fixed = (neighbors.reference, {k: neighbors.pairs[k] for k in keys})
@@ -162,7 +137,7 @@ def _step_with_checks(carry, dt, model, params, fixed=None):
         neighbors = _join_fixed(neighbors, fixed)
     state, neighbors = kick_drift_kick(state, neighbors, dt, model, params)
     if fixed is not None:
-        neighbors = _split_fixed(neighbors, model)[1]
+        neighbors = _split_fixed(neighbors)[1]
     step = step + 1
     bad = unhealthy(state, model)
     record = (failure[0] < 0) & jnp.any(bad)
@@ -449,9 +424,7 @@ def _raise_failure(failure, dt, order=None, state=None, model=None):
 def _raise_overflow(overflow):
     if bool(overflow):
         _raised.error = NeighborOverflowError(
-            f"{NeighborOverflowError.MARK} inside a traced (jit/grad/vmap) simulation, where it "
-            "cannot be re-allocated; raise Model.neighbor_capacity (e.g. "
-            "case.replace(model=case.model.replace(neighbor_capacity=2.0)))"
+            overflow_message("inside a traced (jit/grad/vmap) simulation")
         )
         raise _raised.error
 
@@ -579,7 +552,7 @@ def simulate(
         )
     if traced:
         if inside_trace():
-            neighbors = _rebuilt_as_zeros(neighbors, model)
+            neighbors = _rebuilt_as_zeros(neighbors)
         states = _raising_what_the_run_raised(run, state, neighbors, dt, params, model, segments)
     else:
         states = run(state, neighbors, dt, params, model, segments=segments)
@@ -624,7 +597,7 @@ def _simulate_compiled(
     )
 
 
-def _rebuilt_as_zeros(neighbors: Neighbors, model) -> Neighbors:
+def _rebuilt_as_zeros(neighbors: Neighbors) -> Neighbors:
     """``neighbors`` with the arrays that the traced run's forced rebuild overwrites (the
     searched list and its reference positions, the lists split from it, their support
     level and its origin) replaced by zeros made in the enclosing trace.  Inside an outer
@@ -633,7 +606,7 @@ def _rebuilt_as_zeros(neighbors: Neighbors, model) -> Neighbors:
     reference positions make jax-md's rebuild see every particle as moved."""
     if neighbors.search is None:
         return neighbors
-    fixed, rest = _split_fixed(neighbors, model)
+    fixed, rest = _split_fixed(neighbors)
 
     def zeros(tree):
         return jax.tree_util.tree_map(jnp.zeros_like, tree)
@@ -660,11 +633,11 @@ def _simulate_traced(state, neighbors, dt, params, model, *, segments, checkpoin
     evaluate the first neighbour rebuild and evaluation while compiling (constant
     folding: a sort of every particle, seconds at 40,000 particles)."""
     state, neighbors = jax.lax.optimization_barrier((state, neighbors))
-    neighbors = update_neighbors(state.position, neighbors, model, rebuild=True)
+    neighbors = update_neighbors(state.position, neighbors, rebuild=True)
     state, neighbors = stepper_for(model).init((state, neighbors), params)
     # what no step changes (a solid's reference list and quantities) stays out of the
     # scans' carry: reverse mode then keeps it once, not once per step or chunk
-    fixed, neighbors = _split_fixed(neighbors, model)
+    fixed, neighbors = _split_fixed(neighbors)
     carry, all_frames = _initial_carry(state, neighbors), [_expand(state)]
     for save_every, n_frames in segments:
         carry, frames = _run_frames(
@@ -807,7 +780,7 @@ def _run_chunk_growing(
             extra_capacity=extra[0],
             compact_rows=True,
             margin=NEIGHBOR_MARGIN,
-            at_least=widest(old, _grown(old, _needed(lost, model, extra[0]))),
+            at_least=widest(old, grown(old, needed_sizes(lost, extra[0]))),
         )
         neighbors = neighbors.replace(reference=lost.reference)
         carry = (state, neighbors, *carry[2:])
@@ -838,46 +811,6 @@ def _growth(old: ListSizes, new: ListSizes, model) -> str:
         if rows != old.members.get(key, 0)
     ]
     return ", ".join(changes)
-
-
-def _grown(old: ListSizes, needed: ListSizes) -> ListSizes:
-    """The sizes to re-allocate to after an overflow: what each list needed, and a list
-    that overflowed at least :data:`OVERFLOW_GROWTH` times its old size and
-    :data:`OVERFLOW_MIN_SIZE`.  A list that overflowed once tends to again (a flow
-    spreading along a wall, or reaching a structure, brings ever more particles to it)
-    and every re-allocation compiles the chunk anew: growing by a factor keeps the
-    number of re-allocations logarithmic in the growth, and the floor spares the lists
-    between two systems that start nearly empty (a fluid's against an obstacle it has
-    not reached: 1 slot, 1 row) one re-allocation per few particles that arrive.
-    Widths stay capped by the search's (:func:`build_neighbors`)."""
-
-    def grow(before: dict, after: dict) -> dict:
-        return {
-            key: max(need, math.ceil(OVERFLOW_GROWTH * before.get(key, 0)), OVERFLOW_MIN_SIZE)
-            if need > before.get(key, 0)
-            else need
-            for key, need in after.items()
-        }
-
-    return ListSizes(
-        needed.search, grow(old.widths, needed.widths), grow(old.members, needed.members)
-    )
-
-
-def _needed(neighbors: Neighbors, model, extra: int) -> ListSizes:
-    """The split and compacted list sizes for the counts ``neighbors`` met (sized as an
-    allocation sizes them from the counts it measures)."""
-    counts = [int(c) for c in np.asarray(neighbors.counts)]
-    width = len(neighbors.capacities)
-    widths = {
-        key: int(math.ceil(c * (1.0 + NEIGHBOR_MARGIN))) + extra
-        for (key, _), c in zip(neighbors.capacities, counts[:width], strict=True)
-    }
-    members = {
-        key: int(math.ceil(c * model.neighbor_capacity)) + extra
-        for (key, _), c in zip(neighbors.member_capacities, counts[width:], strict=True)
-    }
-    return ListSizes(0, widths, members)
 
 
 def _check_finite(state: State) -> None:

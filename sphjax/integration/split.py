@@ -42,9 +42,10 @@ import jax.numpy as jnp
 from sphjax.core.state import Kind, State
 from sphjax.integration import step as kdk
 from sphjax.integration.stepper import KickDriftKickStepper
+from sphjax.neighbors import reference_pairs, update_neighbors
 from sphjax.physics.interactions import INTERACTIONS
 from sphjax.physics.pairs import Geometry
-from sphjax.physics.rhs import Context, evaluate, reference_pairs, update_neighbors
+from sphjax.physics.rhs import Context, evaluate
 from sphjax.physics.solid.system import SolidSystem, update_solid
 
 _PER_PARTICLE = (
@@ -127,7 +128,7 @@ def split_step(state: State, neighbors, dt, model, params):
         position=drifted.position.at[s].set(inner.position),
         velocity=drifted.velocity.at[s].set(inner.velocity),
     )
-    neighbors = update_neighbors(drifted.position, neighbors, model)
+    neighbors = update_neighbors(drifted.position, neighbors)
     out = evaluate(drifted, neighbors, model, params, density_step=dt)
     out = kdk.closing_kick(out, dt, model)
     solid = coupling_kick(inner, out.acceleration[s] - inner.acceleration)

@@ -18,7 +18,8 @@ from __future__ import annotations
 import dataclasses
 
 from sphjax.integration import step as kdk
-from sphjax.physics.rhs import evaluate, update_neighbors
+from sphjax.neighbors import update_neighbors
+from sphjax.physics.rhs import evaluate
 
 
 @dataclasses.dataclass(frozen=True)
@@ -39,7 +40,7 @@ class KickDriftKickStepper:
         model, updated = self.model, []
 
         def rates(drifted, density_step):
-            updated.append(update_neighbors(drifted.position, neighbors, model))
+            updated.append(update_neighbors(drifted.position, neighbors))
             return evaluate(drifted, updated[0], model, params, density_step=density_step)
 
         return kdk.kick_drift_kick(state, dt, model, rates), updated[0]

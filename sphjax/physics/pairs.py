@@ -45,6 +45,7 @@ from sphjax._linear_call import custom_adjoint
 from sphjax.core import kernels
 from sphjax.core.pytree import pytree_dataclass
 from sphjax.core.space import displacement_fn, dot, scale
+from sphjax.neighbors.lists import PairList
 
 tree_map = jax.tree_util.tree_map
 
@@ -164,39 +165,6 @@ class Geometry:
 def _is_zero(cotangent) -> bool:
     """A cotangent known to be zero when the program is traced (a Python ``0.0``)."""
     return isinstance(cotangent, int | float) and cotangent == 0
-
-
-@pytree_dataclass(static=("n_rows", "n_cols"))
-class PairList:
-    """Neighbours of the particles of one system (rows) among those of another (columns).
-
-    Attributes:
-      idx: ``[n_rows, K]`` column indices, padded with ``n_cols`` (``[M, K]`` for the
-        ``members`` only, when given).
-      transpose: ``[n_cols, K']`` row indices of each column particle's neighbours, padded
-        with ``n_rows`` (the same pairs seen from the columns), or ``None`` when rows and
-        columns are the same particles (the list is then its own transpose).  With
-        ``members`` its entries are positions in ``members`` (padded with ``M``); with
-        ``transpose_members`` its rows are those columns only.
-      members: ``None``, or ``[M]`` the rows that have neighbours at all (padded with
-        ``n_rows``): a fluid's list against a wall covers only the fluid particles near
-        the wall, so the sum costs ``M`` rows, not ``n_rows``.
-      transpose_members: ``None``, or ``[M']`` the columns the rows of ``transpose`` are
-        (padded with ``n_cols``).
-      geometry: ``None``, or the :class:`PairGeometry` (``[n_rows, K, ...]``) of a list
-        within one system whose positions ``rows["x"]`` never change (a solid's
-        reference configuration): computed once per run (:func:`stored_geometry`), pair
-        sums over the list read it instead of computing it at every evaluation, and
-        reverse mode returns its cotangent (to the positions it was computed from).
-    """
-
-    idx: jax.Array
-    transpose: jax.Array | None
-    n_rows: int
-    n_cols: int
-    members: jax.Array | None = None
-    transpose_members: jax.Array | None = None
-    geometry: PairGeometry | None = None
 
 
 def stored_geometry(x, pairs: PairList, geometry: Geometry) -> PairGeometry:

@@ -2,13 +2,13 @@
 
 :class:`RadiusGraph` wraps :class:`sphjax.neighbors.NeighborSearch` (jax-md cell list,
 dense format ``idx[i, k]``: the ``k``-th neighbour, sender, of particle ``i``, receiver;
-padded with ``N``), built for a Model whose kernel support is the connectivity radius
-and whose domain is the dataset's box.  So the surrogate and the solver share one
-neighbour search: the minimum image on periodic axes, the padded box on closed axes and
-the Verlet skin (the list holds every pair within ``radius + skin``; the features mask
-pairs beyond ``radius``).  The capacity ``K`` is set when the graph is allocated
-(outside ``jit``); inside ``jit`` the graph is updated for new positions and reports an
-overflow, and the caller re-allocates (never silently).
+padded with ``N``), built for the geometry of a Model whose kernel support is the
+connectivity radius and whose domain is the dataset's box.  So the surrogate and the
+solver share one neighbour search: the minimum image on periodic axes, the padded box on
+closed axes and the Verlet skin (the list holds every pair within ``radius + skin``; the
+features mask pairs beyond ``radius``).  The capacity ``K`` is set when the graph is
+allocated (outside ``jit``); inside ``jit`` the graph is updated for new positions and
+reports an overflow, and the caller re-allocates (never silently).
 """
 
 from __future__ import annotations
@@ -20,7 +20,7 @@ import jax.numpy as jnp
 
 from sphjax.core.kernels import WendlandC2
 from sphjax.core.model import Domain, Model
-from sphjax.core.neighbors import NeighborSearch
+from sphjax.neighbors import NeighborSearch, SearchGeometry
 from sphjax.physics.fluid.system import FluidSystem
 
 
@@ -52,7 +52,8 @@ class RadiusGraph:
 
     @property
     def search(self) -> NeighborSearch:
-        return NeighborSearch(self.model, x64=bool(jax.config.jax_enable_x64))
+        geometry = SearchGeometry.of(self.model)
+        return NeighborSearch(geometry, x64=bool(jax.config.jax_enable_x64))
 
     def allocate(self, position, extra_capacity: int = 0):
         """A neighbour list for concrete ``[N, d]`` positions (outside ``jit``)."""

@@ -1,17 +1,20 @@
-"""Neighbour search: jax-md cell lists, and neighbour lists per pair of systems.
+"""The neighbour search: geometry only.
 
-Systems that interact in the current configuration (fluid, walls) search their neighbours
-together with jax-md cell lists (``jax_md.partition.neighbor_list``, dense format
-``[N, K]``) and a Verlet skin: the list is rebuilt inside ``jit`` only when some particle
-has moved half the skin.  At each rebuild it is split into one list per interacting pair of
-systems (:func:`split_list`), each with a capacity sized from the neighbour counts measured
-when it was allocated, so that pairs that do not interact (wall-wall) are never formed.
-Capacities are fixed when allocated, outside ``jit``.  An overflow is never silent:
-:func:`sphjax.simulate` re-allocates with more room and repeats the lost chunk, or, under
-``jax.grad`` / ``jit``, stops with an error naming ``Model.neighbor_capacity``.
+A search is described by a :class:`SearchGeometry`: the kernel support radius, the Verlet
+skin, the domain (its box and periodic axes) and the capacity multiplier, nothing of the
+physics.  Particles that interact in the current configuration search their neighbours
+with jax-md cell lists (``jax_md.partition.neighbor_list``, dense format ``[N, K]``,
+:class:`NeighborSearch`) and a Verlet skin: the list is rebuilt inside ``jit`` only when
+some particle has moved half the skin.  The helpers here cut such a list into the
+neighbours of one block of particles among another (:func:`split_list`), pack its rows
+that have neighbours (:func:`compact_rows`), keep only the neighbours inside the support
+(:func:`support_list`), and measure the counts an allocation is sized from
+(:func:`measured_capacity`, :func:`measured_members`, :func:`measured_support`; the
+sizing rule is :func:`sphjax.neighbors.capacity.sized`).
 
 Solids use their reference-configuration neighbours, found once
-(:func:`reference_neighbors`; eqs. 15-16).
+(:func:`reference_neighbors`; eqs. 15-16), by a vectorised numpy cell list
+(:func:`points_within`).
 """
 
 from __future__ import annotations
@@ -20,7 +23,6 @@ import collections
 import dataclasses
 import functools
 import hashlib
-import math
 
 import jax
 import jax.numpy as jnp
@@ -28,6 +30,7 @@ import numpy as np
 
 from sphjax._jax_md import modules as _jax_md_modules
 from sphjax.core.space import displacement_fn
+from sphjax.neighbors.capacity import sized
 
 partition, jmd_space = _jax_md_modules("partition", "space")
 
@@ -35,8 +38,44 @@ _CELL_LIST_FNS: dict = {}
 
 
 @dataclasses.dataclass(frozen=True)
+class SearchGeometry:
+    """What a neighbour search needs (hashable): the kernel support radius ``cutoff``,
+    the Verlet skin as a fraction of it (``skin_fraction``), the ``domain``
+    (:class:`sphjax.core.model.Domain`) and the multiplier on the measured neighbour
+    count that sizes a list (``capacity_multiplier``)."""
+
+    cutoff: float
+    skin_fraction: float
+    domain: object
+    capacity_multiplier: float
+
+    @classmethod
+    def of(cls, model) -> SearchGeometry:
+        """The geometry of a Model: ``cutoff``, ``neighbor_skin``, ``domain``,
+        ``neighbor_capacity``."""
+        return cls(model.cutoff, model.neighbor_skin, model.domain, model.neighbor_capacity)
+
+    @property
+    def skin(self) -> float:
+        """The Verlet skin, a length."""
+        return self.skin_fraction * self.cutoff
+
+
+_SEARCHES: dict = {}
+
+
+def neighbor_search(geometry: SearchGeometry) -> NeighborSearch:
+    """The jax-md search of ``geometry`` (one per geometry and float precision)."""
+    key = (geometry, bool(jax.config.jax_enable_x64))
+    if key not in _SEARCHES:
+        _SEARCHES[key] = NeighborSearch(geometry, x64=key[1])
+    return _SEARCHES[key]
+
+
+@dataclasses.dataclass(frozen=True)
 class NeighborSearch:
-    """jax-md cell-list neighbour search for a Model (built once, outside ``jit``).
+    """jax-md cell-list neighbour search of a :class:`SearchGeometry` (built once, outside
+    ``jit``).
 
     Positions are shifted into the box jax-md expects (``[0, L)`` per axis).  Non-periodic
     axes get a padded box (``size + 2 (cutoff + skin)``) so that no image across them is
@@ -46,20 +85,20 @@ class NeighborSearch:
     hold constants of that precision, so a session that switches it needs another search.
     """
 
-    model: object
+    geometry: SearchGeometry
     x64: bool = False
 
     @property
     def skin(self) -> float:
-        return self.model.neighbor_skin * self.model.cutoff
+        return self.geometry.skin
 
     @property
     def _padding(self) -> float:
-        return 2.0 * (self.model.cutoff + self.skin)
+        return 2.0 * (self.geometry.cutoff + self.skin)
 
     @property
     def box(self) -> np.ndarray:
-        domain = self.model.domain
+        domain = self.geometry.domain
         return np.array(
             [
                 size if periodic else size + 2.0 * self._padding
@@ -69,7 +108,7 @@ class NeighborSearch:
 
     def to_box(self, position):
         """``position`` in jax-md's box (numpy for a numpy array, else jax.numpy)."""
-        domain = self.model.domain
+        domain = self.geometry.domain
         offset = np.array(
             [
                 -lo if periodic else -lo + self._padding
@@ -80,7 +119,7 @@ class NeighborSearch:
         box = self.box.astype(position.dtype)
         return (np.mod if isinstance(position, np.ndarray) else jnp.mod)(shifted, box)
 
-    @functools.cache  # noqa: B019 (one NeighborSearch per Model, cached in integrate)
+    @functools.cache  # noqa: B019 (one NeighborSearch per geometry: neighbor_search)
     def _functions(self, dr_threshold: float):
         # jax-md computes a few constants (box, cutoffs) with jax.numpy when the functions
         # are built.  The first call may happen inside a trace (``rebuild`` under
@@ -91,9 +130,9 @@ class NeighborSearch:
             return partition.neighbor_list(
                 displacement,
                 self.box,
-                r_cutoff=self.model.cutoff + (self.skin if dr_threshold == 0 else 0.0),
+                r_cutoff=self.geometry.cutoff + (self.skin if dr_threshold == 0 else 0.0),
                 dr_threshold=dr_threshold,
-                capacity_multiplier=self.model.neighbor_capacity,
+                capacity_multiplier=self.geometry.capacity_multiplier,
                 format=partition.Dense,
             )
 
@@ -106,7 +145,7 @@ class NeighborSearch:
     ):
         """A new neighbour list for concrete ``position`` (outside ``jit``).
 
-        ``margin``: ``None`` sizes the list ``Model.neighbor_capacity`` times the largest
+        ``margin``: ``None`` sizes the list ``capacity_multiplier`` times the largest
         neighbour count now, plus ``extra_capacity``; a number sizes it the largest count
         times ``1 + margin``, plus ``extra_capacity`` (for a driver that re-allocates on
         overflow: fewer padded slots, each of which costs as much as a neighbour).
@@ -121,7 +160,7 @@ class NeighborSearch:
         if margin is not None:
             idx = np.asarray(neighbors.idx)
             most = int(np.max(np.sum(idx < idx.shape[0], axis=1), initial=0))
-            width = max(1, int(math.ceil(most * (1.0 + margin))) + int(extra_capacity), at_least)
+            width = max(sized(most, 1.0 + margin, extra_capacity), at_least)
             if width < capacity(neighbors):
                 # jax-md packs each row's neighbours first: the columns cut hold padding
                 neighbors = neighbors.set(idx=jax.device_put(idx[:, :width]), max_occupancy=width)
@@ -132,12 +171,12 @@ class NeighborSearch:
         same list, in one compiled program instead of jax-md's eager set-up (some 40
         small programs compiled on first use, most of a small run's start-up): the cell
         capacity is counted here as jax-md counts it (the fullest cell times
-        ``Model.neighbor_capacity``, plus ``extra_capacity``), the list is built by the
+        ``capacity_multiplier``, plus ``extra_capacity``), the list is built by the
         jitted rebuild at the full width of the candidates (which cannot overflow), and
         cut to jax-md's width, its largest row times the multiplier plus the extra."""
         fns = self._functions(self.skin)
         n, dim = x.shape
-        cutoff = self.model.cutoff + self.skin
+        cutoff = self.geometry.cutoff + self.skin
         box = self.box.astype(np.float32)  # jax-md's cell list takes the box in float32
         cells = np.floor(box / cutoff)
         if not np.all(cutoff < box / 3.0):  # jax-md searches without a cell list
@@ -149,13 +188,13 @@ class NeighborSearch:
         index = np.mod((x / cell_size).astype(np.int32), cells.astype(np.int32))
         strides = np.cumprod(np.concatenate([[1], cells[:-1]])).astype(np.int64)
         fullest = np.bincount(index @ strides, minlength=int(np.prod(cells))).max()
-        cell_capacity = int(fullest * self.model.neighbor_capacity) + int(extra_capacity)
+        cell_capacity = int(fullest * self.geometry.capacity_multiplier) + int(extra_capacity)
         # The update and cell-list functions are static (pytree metadata) in the list: new
         # function objects at every allocation would make every jitted step recompile;
         # ``_functions`` is cached, and so is the cell-list function (same box, cell size
         # and multiplier).
         cell_list_fn = _CELL_LIST_FNS.setdefault(
-            self, partition.cell_list(box, cutoff, self.model.neighbor_capacity)
+            self, partition.cell_list(box, cutoff, self.geometry.capacity_multiplier)
         )
         width = 3**dim * cell_capacity
         # numpy leaves: the compiled program then runs on them even inside a trace (an
@@ -174,7 +213,7 @@ class NeighborSearch:
         full = _build(self, x.shape, x.dtype.str, cell_capacity)(x, template)
         idx = np.asarray(full.idx)
         most = int(np.max(np.sum(idx < n, axis=1), initial=0))
-        occupancy = int(most * self.model.neighbor_capacity + extra_capacity)
+        occupancy = int(most * self.geometry.capacity_multiplier + extra_capacity)
         occupancy = min(occupancy, width, n - 1)
         return full.set(
             idx=jax.device_put(np.ascontiguousarray(idx[:, :occupancy])),
@@ -206,7 +245,7 @@ def _build(search: NeighborSearch, shape: tuple, dtype: str, cell_capacity: int)
         cell_capacity,
         width,
         partition.Dense,
-        search.model.cutoff + search.skin,
+        search.geometry.cutoff + search.skin,
         _CELL_LIST_FNS[search],
         search._functions(search.skin).update,
     )
@@ -225,9 +264,10 @@ _REFERENCE_LISTS: collections.OrderedDict = collections.OrderedDict()
 _REFERENCE_LISTS_KEPT = 8
 
 
-def reference_neighbors(reference_position, members, model) -> np.ndarray:
+def reference_neighbors(reference_position, members, geometry: SearchGeometry) -> np.ndarray:
     """Reference-configuration neighbour indices among ``members`` (numpy; built once per
-    reference configuration and kept for later calls with the same positions and model).
+    reference configuration and kept for later calls with the same positions, support
+    radius and domain).
 
     A vectorised cell list: the members are sorted by cell, and every member's candidates
     are the members of its own and the adjacent cells, filtered by distance (minimum
@@ -244,11 +284,11 @@ def reference_neighbors(reference_position, members, model) -> np.ndarray:
     members = np.asarray(members, dtype=np.int64)
     digest = hashlib.sha1(X.tobytes())
     digest.update(members.tobytes())
-    key = (model.cutoff, model.domain, X.shape, digest.hexdigest())
+    key = (geometry.cutoff, geometry.domain, X.shape, digest.hexdigest())
     if key in _REFERENCE_LISTS:
         _REFERENCE_LISTS.move_to_end(key)
         return _REFERENCE_LISTS[key]
-    idx = _reference_search(X, members, model)
+    idx = _reference_search(X, members, geometry)
     idx.setflags(write=False)
     _REFERENCE_LISTS[key] = idx
     if len(_REFERENCE_LISTS) > _REFERENCE_LISTS_KEPT:
@@ -256,13 +296,13 @@ def reference_neighbors(reference_position, members, model) -> np.ndarray:
     return idx
 
 
-def _reference_search(X, members, model) -> np.ndarray:
+def _reference_search(X, members, geometry: SearchGeometry) -> np.ndarray:
     """:func:`reference_neighbors` without the cache: a vectorised cell list."""
     n = X.shape[0]
     if members.shape[0] == 0:
         return np.full((0, 1), n, dtype=np.int32)
-    domain = model.domain
-    local = points_within(X[members], model.cutoff, domain.lower, domain.size, domain.periodic)
+    domain = geometry.domain
+    local = points_within(X[members], geometry.cutoff, domain.lower, domain.size, domain.periodic)
     padded = np.append(members, n).astype(np.int32)  # the padding (m) becomes n
     return padded[local]
 
@@ -388,8 +428,7 @@ def measured_capacity(union_idx, rows, cols, multiplier: float, extra: int = 0) 
     ``union_idx`` (concrete) times ``multiplier``, plus ``extra``."""
     block = np.asarray(union_idx[rows[0] : rows[1]])
     inside = (block >= cols[0]) & (block < cols[1])
-    most = int(inside.sum(axis=1).max(initial=0))
-    return max(1, int(math.ceil(most * multiplier)) + int(extra))
+    return sized(int(inside.sum(axis=1).max(initial=0)), multiplier, extra)
 
 
 def compact_rows(idx, n_cols: int, capacity: int):
@@ -421,8 +460,7 @@ def measured_members(union_idx, rows, cols, multiplier: float, extra: int = 0) -
     times ``multiplier``, plus ``extra``: the capacity of :func:`compact_rows`."""
     block = np.asarray(union_idx[rows[0] : rows[1]])
     inside = (block >= cols[0]) & (block < cols[1])
-    count = int(inside.any(axis=1).sum())
-    return max(1, int(math.ceil(count * multiplier)) + int(extra))
+    return sized(int(inside.any(axis=1).sum()), multiplier, extra)
 
 
 def support_list(idx, x_rows, x_cols, domain, cutoff: float, width: int):
@@ -472,5 +510,4 @@ def measured_support(idx, x_rows, x_cols, domain, cutoff: float, multiplier: flo
         jnp.asarray(x_rows)[:, None, :], jnp.asarray(x_cols)[jnp.where(real, idx, 0)]
     )
     inside = real & (np.asarray(jnp.sum(dr * dr, axis=-1)) < cutoff**2)
-    most = int(inside.sum(axis=1).max(initial=0))
-    return max(1, int(math.ceil(most * multiplier)) + int(extra))
+    return sized(int(inside.sum(axis=1).max(initial=0)), multiplier, extra)
