@@ -87,6 +87,15 @@ def dry_case(case):
     )
 
 
+def with_gradient_correction(case, choice):
+    """``case`` with its solid's ``gradient_correction`` set to ``choice``."""
+    systems = tuple(
+        s.replace(gradient_correction=choice) if isinstance(s, sphjax.SolidSystem) else s
+        for s in case.model.systems
+    )
+    return case.replace(model=case.model.replace(systems=systems))
+
+
 def measure(case, t_end):
     n_steps = int(round(t_end / case.dt))
     start = time.perf_counter()
@@ -333,6 +342,12 @@ def main(argv=None):
     p.add_argument("--young-modulus", type=float, default=67.5e9)
     p.add_argument("--float64", action="store_true")
     p.add_argument(
+        "--gradient-correction",
+        choices=("first_order", "second_order"),
+        default="first_order",
+        help="the solid's reference kernel gradient (SolidSystem.gradient_correction)",
+    )
+    p.add_argument(
         "--face-weight",
         type=float,
         default=1.0,
@@ -378,11 +393,13 @@ def main(argv=None):
         plate.update(face_weight=args.face_weight, clamp_end_columns=not args.free_end_columns)
     for n in args.n:
         case = hydrostatic_fsi_plate(n=n, **plate)
+        case = with_gradient_correction(case, args.gradient_correction)
         t_end = args.periods * case.info["dry_period"]
         row = dict(n=n, depth=case.info["depth"], dx=case.info["dx"], t_end=t_end)
         row.update({k: v for k, v in plate.items() if k != "depth"})
         row.update(float64=args.float64, end_columns_clamped=not args.free_end_columns)
         row["face_weight"] = args.face_weight
+        row["gradient_correction"] = args.gradient_correction
         row["h"] = float(case.model.smoothing_length)
         row["reference_deflection"] = case.info["reference_deflection"]
         if not args.no_dry:
@@ -393,6 +410,7 @@ def main(argv=None):
         for substeps in [] if args.dry_only else args.substeps:
             k = substeps if substeps == "auto" else int(substeps)
             split = hydrostatic_fsi_plate(n=n, **plate, substeps=k)
+            split = with_gradient_correction(split, args.gradient_correction)
             row["fsi"] = dict(measure(split, t_end), substeps=split.info["substeps"])
             row["fsi"]["dt"] = split.dt
             print(json.dumps(row, default=str)[:400], flush=True)

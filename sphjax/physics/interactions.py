@@ -51,6 +51,7 @@ from sphjax.physics.fluid.viscosity import (
 )
 from sphjax.physics.open_boundary import OpenBoundarySystem
 from sphjax.physics.rigid.system import RigidSystem
+from sphjax.physics.solid.correction import quadratic_weights
 from sphjax.physics.solid.penalty import penalty_force
 from sphjax.physics.solid.system import SolidSystem
 
@@ -285,6 +286,21 @@ def _solid_pullback(pair, a, b, shared, bar, *, domain, penalty):
 pair_sums.define_pullback(_solid_summand, _solid_pullback)
 
 
+def _solid_summand_second_order(pair, a, b, shared, *, domain, penalty, h):
+    """Eq. 14 with the second-order gradient ``psi_ab = G_a omega_ab p(X_ba)``
+    (:mod:`sphjax.physics.solid.correction`), per unit neighbour volume: the variational
+    counterpart of its ``F``, ``(P_a psi_ab - P_b psi_ba) / rho0``,
+
+        = ((P G_lin)_a + (P G_lin)_b) grad0_a W / rho0
+          + ((P G_quad)_a - (P G_quad)_b) q_ab / rho0,
+
+    ``q_ab = omega_ab X_i X_j / h`` (even in ``X_ab``), plus the penalty force;
+    antisymmetric under ``a <-> b``.  Reverse mode: autodiff's (``jax.vjp``)."""
+    out = _solid_summand(pair, a, b, shared, domain=domain, penalty=penalty)
+    quadratic = _matvec((a["PL0q"] - b["PL0q"]) / shared.solid_density, quadratic_weights(pair, h))
+    return {"a": out["a"] + quadratic}
+
+
 def _matvec(matrix, vector):
     return sum(matrix[..., :, i] * vector[..., i, None] for i in range(vector.shape[-1]))
 
@@ -292,9 +308,7 @@ def _matvec(matrix, vector):
 def solid_solid(system: SolidSystem, solid, _other, _solid, pairs, ctx):
     """Solid momentum (eq. 14) over the reference-configuration neighbours."""
     params = ctx.params.solid
-    summand = functools.partial(
-        _solid_summand, domain=ctx.geometry.domain, penalty=system.penalty is not None
-    )
+    penalty = system.penalty is not None
     rows = {
         "x": solid["X"],
         "xc": solid["x"],
@@ -302,6 +316,16 @@ def solid_solid(system: SolidSystem, solid, _other, _solid, pairs, ctx):
         "PL0": solid["PL0"],
         "F": solid["F"],
     }
+    if system.gradient_correction == "second_order":
+        summand = functools.partial(
+            _solid_summand_second_order,
+            domain=ctx.geometry.domain,
+            penalty=penalty,
+            h=ctx.geometry.smoothing_length,
+        )
+        rows["PL0q"] = solid["PL0q"]
+    else:
+        summand = functools.partial(_solid_summand, domain=ctx.geometry.domain, penalty=penalty)
     shared = SolidPairParameters(params.solid_density, params.young_modulus, params.penalty_alpha)
     return ctx.pair_sum(summand, rows, None, pairs, shared, weight="V", parity=-1)
 

@@ -236,10 +236,8 @@ def update_stage(state: State, neighbors: Neighbors, model, params, density_step
 
 def _named(view):
     """The update stage's per-particle outputs, named for the checkpoint policy."""
-    return {
-        k: checkpoint_name(v, UPDATE_FIELDS) if k in ("rho", "p", "v_viscous", "PL0", "F") else v
-        for k, v in view.items()
-    }
+    named = ("rho", "p", "v_viscous", "PL0", "PL0q", "F")
+    return {k: checkpoint_name(v, UPDATE_FIELDS) if k in named else v for k, v in view.items()}
 
 
 def interaction_stage(views, neighbors: Neighbors, model, ctx):

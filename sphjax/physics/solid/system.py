@@ -43,11 +43,24 @@ from sphjax.physics.solid.correction import (
     corrected_kernel_gradient,
     correction_matrix,
     correction_moment,
+    second_order_kernel_gradient,
+    second_order_matrices,
+    second_order_moment,
 )
 from sphjax.physics.solid.deformation import deformation_term
 from sphjax.physics.solid.material import StVenantKirchhoff
 from sphjax.physics.solid.penalty import PenaltyForce
 from sphjax.physics.system import block_fields
+
+#: the choices of ``SolidSystem.gradient_correction``
+GRADIENT_CORRECTIONS = ("first_order", "second_order")
+
+#: the stable step with the second-order gradient, over the first-order one's: its
+#: one-sided weights at a free face are several times the bulk's, and so is the face
+#: particles' stiffness (the dry hydrostatic plate at 3 particles through goes unstable
+#: in its first step at solid Courant number 0.5 and runs at 0.25;
+#: docs/validation_fsi.md)
+SECOND_ORDER_STEP_FACTOR = 0.5
 
 
 @dataclasses.dataclass(frozen=True)
@@ -68,6 +81,14 @@ class SolidSystem:
         forces on it applied as half kicks at the ends of the step; the time step is then
         limited by the fluid and ``k`` times the solid's stable step.  ``1``: one step
         for all.
+      gradient_correction: the reference kernel gradient of eqs. 14 and 16.
+        ``"first_order"`` (default): ``L0_a grad0_a W`` (eq. 15, Bonet & Lok 1999),
+        exact for linear displacement fields.  ``"second_order"``: ``psi_ab`` of
+        :mod:`sphjax.physics.solid.correction`, exact for quadratic ones also at free
+        surfaces (a bent plate's faces); it needs at least three particles through the
+        solid in every direction (else its moment matrix is singular) and equals the
+        first-order gradient wherever the neighbourhood is symmetric
+        (docs/validation_fsi.md, the hydrostatic plate).
     """
 
     material: object = StVenantKirchhoff()
@@ -75,6 +96,7 @@ class SolidSystem:
     clamped_motion: Callable[[Any, Any], Any] | None = None
     boundary: SolidBoundary = SolidBoundary()
     substeps: int = 1
+    gradient_correction: str = "first_order"
 
     kinds = (Kind.SOLID, Kind.CLAMPED)
     current_configuration = False
@@ -96,6 +118,12 @@ class SolidSystem:
         if not isinstance(self.boundary, SolidBoundary):
             raise ValueError(
                 f"SolidSystem.boundary must be SolidBoundary(...), got {self.boundary!r}"
+            )
+
+        if self.gradient_correction not in GRADIENT_CORRECTIONS:
+            raise ValueError(
+                f"SolidSystem.gradient_correction must be one of {GRADIENT_CORRECTIONS}, "
+                f"got {self.gradient_correction!r}"
             )
 
         if not (isinstance(self.substeps, int) and self.substeps >= 1):
@@ -151,9 +179,11 @@ class SolidSystem:
     def time_step_limits(self, v_max: float, params, model, cfl: float) -> list[float]:
         """``substeps CFL h / (c_s + |v|max)`` with the bulk sound speed
         :func:`solid_sound_speed` (split integration: the solid takes ``substeps`` steps
-        of its own per step)."""
+        of its own per step), times :data:`SECOND_ORDER_STEP_FACTOR` with the
+        second-order gradient."""
         c_s = float(solid_sound_speed(params, model.dim))
-        return [self.substeps * cfl * model.smoothing_length / (c_s + v_max)]
+        factor = SECOND_ORDER_STEP_FACTOR if self.gradient_correction == "second_order" else 1.0
+        return [factor * self.substeps * cfl * model.smoothing_length / (c_s + v_max)]
 
     def view(self, state, block: slice, density_step=None) -> dict:
         """The solid's fields ``x, v, m, rho``, its reference positions ``X`` and volumes
@@ -187,7 +217,7 @@ class SolidSystem:
         pair geometry of its list (``X_ab``, ``|X_ab|``, ``W0``, ``grad0 W``) and ``L0``
         (eq. 15, :func:`solid_reference`)."""
         geometry = pair_sums.stored_geometry(view["X"], pairs, ctx.geometry)
-        own = solid_reference(view, pairs.replace(geometry=geometry), ctx)
+        own = solid_reference(view, pairs.replace(geometry=geometry), ctx, self.gradient_correction)
         return {**own, "geometry": geometry}
 
     def body_acceleration(self, view: dict, acceleration, params):
@@ -242,13 +272,39 @@ pair_sums.define_pullback(_deformation_summand, _deformation_pullback)
 pair_sums.transpose_by_autodiff(_deformation_summand)
 
 
-def solid_reference(solid: dict, pairs, ctx) -> dict:
-    """The reference-configuration quantities of a solid: ``{"L0": L0}`` (eq. 15).
+def _second_order_moment_summand(pair, a, b, shared, *, h):
+    """The second-order moment's pair term per unit neighbour volume
+    (:func:`~sphjax.physics.solid.correction.second_order_moment`)."""
+    return second_order_moment(pair, jnp.ones_like(pair.r), h)
+
+
+def _deformation_summand_second_order(pair, a, b, shared, *, domain, h):
+    """Eq. 16's pair term with the second-order gradient: ``-V0_b x_ab psi_ab^T``."""
+    dx = displacement_fn(domain)(a["xc"], b["xc"])
+    dx = dx * pair.mask[..., None]
+    psi = second_order_kernel_gradient(a["L0"], a["L0q"], pair, h)
+    return deformation_term(dx, psi, b["V"])
+
+
+# autodiff's transpose, as for the first-order summand (no hand pull-back)
+pair_sums.transpose_by_autodiff(_deformation_summand_second_order)
+
+
+def solid_reference(solid: dict, pairs, ctx, gradient_correction="first_order") -> dict:
+    """The reference-configuration quantities of a solid: ``{"L0": L0}`` (eq. 15), or
+    with ``gradient_correction="second_order"`` ``{"L0": G_lin, "L0q": G_quad}``, the
+    linear and quadratic blocks of the second-order gradient's ``G_a``
+    (:mod:`sphjax.physics.solid.correction`).
 
     They depend on the reference positions ``X`` and volumes ``V`` only, never on the
     current configuration or the material parameters.
     """
     rows = {"x": solid["X"], "V": solid["V"]}
+    if gradient_correction == "second_order":
+        summand = functools.partial(_second_order_moment_summand, h=ctx.geometry.smoothing_length)
+        moment = ctx.pair_sum(summand, rows, None, pairs, weight="V")
+        G_lin, G_quad = second_order_matrices(moment)
+        return {"L0": G_lin, "L0q": G_quad}
     moment = ctx.pair_sum(_moment_summand, rows, None, pairs, weight="V", parity=1)
     return {"L0": correction_matrix(moment)}
 
@@ -263,13 +319,24 @@ def update_solid(system: SolidSystem, solid: dict, pairs, ctx, reference=None):
       reference: :func:`solid_reference` of this solid, computed once per run, or
         ``None`` (computed here).
     Returns:
-      ``solid`` with ``L0``, ``F``, ``P`` and ``P L0`` (``[n, d, d]``).
+      ``solid`` with ``L0``, ``F``, ``P`` and ``P L0`` (``[n, d, d]``); with the
+      second-order gradient also ``L0q`` and ``P L0q`` (``[n, d, d (d + 1) / 2]``).
     """
     if reference is None:
-        reference = solid_reference(solid, pairs, ctx)
+        reference = solid_reference(solid, pairs, ctx, system.gradient_correction)
     L0 = reference["L0"]
-    summand = functools.partial(_deformation_summand, domain=ctx.geometry.domain)
     rows = {"x": solid["X"], "xc": solid["x"], "V": solid["V"], "L0": L0}
+    if system.gradient_correction == "second_order":
+        summand = functools.partial(
+            _deformation_summand_second_order,
+            domain=ctx.geometry.domain,
+            h=ctx.geometry.smoothing_length,
+        )
+        F = ctx.pair_sum(summand, {**rows, "L0q": reference["L0q"]}, None, pairs)
+        P = system.material.pk1(F, ctx.params.solid)
+        L0q = reference["L0q"]
+        return {**solid, "L0": L0, "L0q": L0q, "F": F, "P": P, "PL0": P @ L0, "PL0q": P @ L0q}
+    summand = functools.partial(_deformation_summand, domain=ctx.geometry.domain)
     F = ctx.pair_sum(summand, rows, None, pairs)
     P = system.material.pk1(F, ctx.params.solid)
     return {**solid, "L0": L0, "F": F, "P": P, "PL0": P @ L0}
