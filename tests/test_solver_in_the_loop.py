@@ -47,9 +47,29 @@ def test_zero_initialised_correction_is_the_coarse_solver_and_training_lowers_th
     assert trained[0, -1] < coarse[0, -1]
 
 
+def test_a_learning_rate_schedule_reaches_the_optimiser(problem):
+    """``lr`` may be an optax schedule: one that drops to zero after three iterations
+    leaves the network unchanged from then on (the loss, computed before each update on
+    the one condition and start, repeats exactly), while the first three updates lower it.
+    """
+    import optax
+
+    net = sil.Corrector(problem, jax.random.PRNGKey(0))
+    schedule = optax.piecewise_constant_schedule(1e-2, {3: 0.0})
+    result = sil.train(problem, net, unroll=4, iterations=6, lr=schedule, log=lambda s: None)
+    losses = np.asarray(result.losses)
+    assert losses[3] < losses[0]
+    assert len(set(losses[:4].tolist())) == 4  # the first three updates moved the network
+    np.testing.assert_array_equal(losses[3:], losses[3])  # the later ones did not
+
+
 def test_bad_arguments_are_named(problem):
     with pytest.raises(ValueError, match="unroll must lie in 1..4"):
         sil.train(problem, sil.Corrector(problem, jax.random.PRNGKey(0)), unroll=5, iterations=1)
+    with pytest.raises(ValueError, match="lr must be a positive number or an optax schedule"):
+        sil.train(
+            problem, sil.Corrector(problem, jax.random.PRNGKey(0)), lr=0.0, unroll=4, iterations=1
+        )
     with pytest.raises(ValueError, match="mode must be one of"):
         sil.Corrector(problem, jax.random.PRNGKey(0), mode="hybrid")
     with pytest.raises(ValueError, match="scale must be a positive velocity"):

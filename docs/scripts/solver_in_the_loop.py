@@ -12,7 +12,12 @@ artificial-viscosity ``alpha`` of ``--train-alpha``, evaluated on ``--test-alpha
 seen in training), probes over ``[0, 2 L] x [0, H]`` (twice the column's width, its
 height).  Errors are the relative L2 probe-velocity errors of
 :mod:`sphjax.surrogate.solver_in_the_loop` at coarse steps 20 and 100.  Both networks get
-the same wall-clock budget (after compilation).
+the same wall-clock budget (after compilation) unless ``--gns-seconds`` gives the pure
+network its own; ``--iterations`` also caps it and is the length of the learning-rate
+decay ``--lr`` -> ``--lr-final``.  Training runs in pieces: ``--save PREFIX`` keeps each
+network and its training record, ``--resume PREFIX`` continues them (the results report
+the totals and the whole loss curve).  The results end with the wall seconds per coarse
+step of the solver, of each network's step and of the fine reference over the same time.
 """
 
 from __future__ import annotations
@@ -22,11 +27,52 @@ import json
 import time
 from pathlib import Path
 
+import equinox as eqx
 import jax
 import numpy as np
+import optax
 
 import sphjax
 from sphjax.surrogate import solver_in_the_loop as sil
+
+
+def step_costs(problem, nets: dict, repeats: int = 3) -> dict:
+    """Wall seconds per coarse step (the solver alone and each trained network, after
+    compiling; the best of ``repeats`` rollouts over the horizon) and per coarse-step span
+    of the fine reference (``ratio`` fine steps)."""
+    pc, pf = problem.conditions[0]
+    n = problem.horizon
+    nbrs = sil.allocate(problem)
+
+    def best(run):
+        jax.block_until_ready(run())  # compile
+        times = []
+        for _ in range(repeats):
+            t = time.perf_counter()
+            jax.block_until_ready(run())
+            times.append(time.perf_counter() - t)
+        return min(times)
+
+    costs = {}
+    for name, (net, mode) in {"coarse solver": (None, "correction"), **nets}.items():
+        roll = eqx.filter_jit(
+            lambda net, mode=mode: sil.rollout(
+                problem, net, mode, problem.coarse.state, pc, n, nbrs
+            )[1]
+        )
+        costs[name] = best(lambda roll=roll, net=net: roll(net)) / n
+    fine = problem.fine
+    costs["fine solver"] = (
+        best(
+            lambda: (
+                sphjax.simulate(
+                    fine, pf, n_steps=n * problem.ratio, dt=problem.dt / problem.ratio
+                ).final.position
+            )
+        )
+        / n
+    )
+    return costs
 
 
 def main(argv=None) -> dict:
@@ -45,6 +91,21 @@ def main(argv=None) -> dict:
     p.add_argument("--latent", type=int, default=16)
     p.add_argument("--lr", type=float, default=1e-3)
     p.add_argument(
+        "--iterations",
+        type=int,
+        default=None,
+        help="also cap each training at this many iterations (the schedule's length)",
+    )
+    p.add_argument(
+        "--lr-final",
+        type=float,
+        default=None,
+        help="decay the learning rate exponentially from --lr to this over --iterations",
+    )
+    p.add_argument(
+        "--gns-seconds", type=float, default=None, help="the pure network's budget (--seconds)"
+    )
+    p.add_argument(
         "--gravity-scale",
         action="store_true",
         help="correction of |g| dt per unit output (default 0.01 U; flows from rest)",
@@ -53,9 +114,23 @@ def main(argv=None) -> dict:
     p.add_argument(
         "--networks", nargs="+", default=["correction", "gns"], choices=["correction", "gns"]
     )
+    p.add_argument(
+        "--save",
+        default=None,
+        help="PREFIX: write each trained network to PREFIX.<mode>.eqx and its training "
+        "record (losses, iterations, seconds) to PREFIX.<mode>.json",
+    )
+    p.add_argument(
+        "--resume",
+        default=None,
+        help="PREFIX of an earlier --save: continue training those networks (a new piece "
+        "of --seconds / --iterations with its own schedule); the results report the totals",
+    )
     p.add_argument("--figure", default=None, help="PNG of the error curves (optional)")
     p.add_argument("--small", action="store_true", help="a minute-long smoke run")
     args = p.parse_args(argv)
+    if args.lr_final is not None and args.iterations is None:
+        p.error("--lr-final needs --iterations (the length of the decay)")
     if args.small:
         args.n, args.horizon, args.unroll, args.seconds, args.fine_seeds = 8, 20, 5, 10.0, 2
 
@@ -92,23 +167,56 @@ def main(argv=None) -> dict:
     )
     curves = {"coarse solver": sil.errors(test_problem, None)[0]}
     names = {"correction": "solver + correction", "gns": "pure GNS"}
+    trained = {}
     for mode, name in [(m, names[m]) for m in args.networks]:
+        t_train = time.perf_counter()
         scale = None
         if args.gravity_scale and mode == "correction":
             scale = float(np.linalg.norm(np.asarray(coarse.params.gravity))) * train_problem.dt
         net = sil.Corrector(
             train_problem, jax.random.PRNGKey(0), mode=mode, latent=args.latent, scale=scale
         )
+        previous = dict(iterations=0, seconds=0.0, cpu_seconds=0.0, losses=[], pieces=0)
+        if args.resume is not None:
+            net = eqx.tree_deserialise_leaves(f"{args.resume}.{mode}.eqx", net)
+            previous = json.loads(Path(f"{args.resume}.{mode}.json").read_text())
+        lr = args.lr
+        if args.lr_final is not None:
+            lr = optax.exponential_decay(args.lr, args.iterations, args.lr_final / args.lr)
+        seconds = args.seconds
+        if mode == "gns" and args.gns_seconds is not None:
+            seconds = args.gns_seconds
         res = sil.train(
-            train_problem, net, mode=mode, unroll=args.unroll, seconds=args.seconds, lr=args.lr
+            train_problem,
+            net,
+            mode=mode,
+            unroll=args.unroll,
+            seconds=seconds,
+            iterations=args.iterations,
+            lr=lr,
+            seed=previous["iterations"],  # a resumed piece draws new windows
         )
+        record = dict(
+            iterations=previous["iterations"] + res.iterations,
+            seconds=previous["seconds"] + res.seconds,
+            cpu_seconds=previous["cpu_seconds"] + res.cpu_seconds,
+            losses=previous["losses"] + res.losses,
+            pieces=previous["pieces"] + 1,
+        )
+        if args.save is not None:
+            Path(args.save).parent.mkdir(parents=True, exist_ok=True)
+            eqx.tree_serialise_leaves(f"{args.save}.{mode}.eqx", res.net)
+            Path(f"{args.save}.{mode}.json").write_text(json.dumps(record))
         curves[name] = sil.errors(test_problem, res.net, mode=mode)[0]
+        trained[name] = (res.net, mode)
         results[f"{name} training"] = dict(
-            iterations=res.iterations,
-            seconds=res.seconds,
-            cpu_seconds=res.cpu_seconds,
-            losses=res.losses,
+            record,  # the totals over every piece
+            last_piece=dict(
+                iterations=res.iterations, seconds=res.seconds, cpu_seconds=res.cpu_seconds
+            ),
+            wall_seconds_with_compile=time.perf_counter() - t_train,
             final_loss=float(np.mean(res.losses[-10:])),
+            scale=float(res.net.scale),
         )
     for name, curve in curves.items():
         results[name] = {f"error_step_{k}": float(curve[k]) for k in [0, *report]}
@@ -123,12 +231,15 @@ def main(argv=None) -> dict:
         for name in curves
         if name != "coarse solver"
     }
+    if not args.small:
+        results["seconds per coarse step"] = step_costs(test_problem, trained)
     Path(args.out).parent.mkdir(parents=True, exist_ok=True)
     Path(args.out).write_text(json.dumps(results, indent=1))
     if args.figure is not None:
         from surrogate_figures import plot_sil  # the same plot as the Taylor-Green page
 
         plot_sil(results, Path(args.figure))
+    print("seconds per coarse step", results.get("seconds per coarse step"))
     for name in curves:
         print(name, {k: round(v, 4) for k, v in results[name].items() if k != "curve"})
     return results

@@ -208,19 +208,35 @@ def plot_rollout(sim, model, test, path: Path, n_steps: int) -> None:
 
 
 def plot_sil(results: dict, path: Path) -> None:
+    """The error curves on the test condition and, beside them, each network's training
+    loss (mean over 10 iterations) when the results carry it."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    fig, ax = plt.subplots(figsize=(5.5, 3.6))
+    trained = [n for n in ("solver + correction", "pure GNS") if f"{n} training" in results]
+    fig, axes = plt.subplots(1, 2 if trained else 1, figsize=(10 if trained else 5.5, 3.6))
+    ax = axes[0] if trained else axes
     for name in ("coarse solver", "solver + correction", "pure GNS"):
-        curve = np.asarray(results[name]["curve"])
-        ax.plot(np.arange(len(curve)), curve, label=name)
+        if name in results:
+            curve = np.asarray(results[name]["curve"])
+            ax.plot(np.arange(len(curve)), curve, label=name)
     ax.set_yscale("log")
     ax.set_xlabel("coarse step")
     ax.set_ylabel("relative probe-velocity error")
     ax.legend()
+    if trained:
+        for name in trained:
+            losses = np.asarray(results[f"{name} training"]["losses"])
+            k = len(losses) // 10 * 10
+            if k:
+                mean = losses[:k].reshape(-1, 10).mean(1)
+                axes[1].plot(10 * np.arange(1, len(mean) + 1), mean, label=name)
+        axes[1].set_yscale("log")
+        axes[1].set_xlabel("training iteration")
+        axes[1].set_ylabel("training loss (mean of 10)")
+        axes[1].legend()
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)

@@ -381,7 +381,7 @@ def train(
     unroll: int = 10,
     iterations: int | None = None,
     seconds: float | None = None,
-    lr: float = 1e-3,
+    lr: float | optax.Schedule = 1e-3,
     clip: float = 1.0,
     refresh_every: int = 25,
     seed: int = 0,
@@ -393,12 +393,16 @@ def train(
     the start state is the model's own rollout at ``s`` (refreshed every
     ``refresh_every`` iterations, no gradient through it), the loss the mean over the
     ``unroll`` steps of the squared relative probe-velocity error against the fine
-    reference.  Adam with gradients clipped to global norm ``clip``.  Budget:
+    reference.  Adam with gradients clipped to global norm ``clip``; ``lr`` is a number or
+    an optax schedule of the iteration (e.g. ``optax.exponential_decay``, so the steps
+    shrink as the correction settles).  Budget:
     ``iterations`` and/or wall-clock ``seconds`` (after compiling); the result also
     records the process's CPU seconds over the same span.
     """
     if iterations is None and seconds is None:
         raise ValueError("give iterations or seconds (the training budget)")
+    if not callable(lr) and not float(lr) > 0:
+        raise ValueError(f"lr must be a positive number or an optax schedule, got {lr}")
     if not 1 <= unroll <= problem.horizon:
         raise ValueError(
             f"unroll must lie in 1..{problem.horizon} (the reference horizon), got {unroll}"
