@@ -28,7 +28,7 @@ import numpy as np
 
 import sphjax
 from sphjax.core import kernels
-from sphjax.core.neighbors import points_within
+from sphjax.neighbors.search import points_within
 
 SHIFTS = [(i, j) for i in (-1, 0, 1) for j in (-1, 0, 1)]
 
