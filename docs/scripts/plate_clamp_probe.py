@@ -74,10 +74,10 @@ def inward(case, columns):
     return case.replace(state=case.state.replace(kind=kind))
 
 
-def run(n, variant, periods):
+def run(n, variant, periods, h_factor=None):
     zero = variant == "zero_clamp_stress"
     solid_system.update_solid = _zero_clamped_stress if zero else _update_solid
-    case = hydrostatic_fsi_plate(n=n, depth=0.5)
+    case = hydrostatic_fsi_plate(n=n, depth=0.5, h_factor=h_factor)
     case = vf.dry_case(vf.with_gradient_correction(case, "second_order"))
     if variant.startswith("clamp"):
         case = trimmed(case, int(variant[5:]))
@@ -115,6 +115,7 @@ def run(n, variant, periods):
     row = dict(
         n=n,
         variant=variant,
+        h_factor=h_factor,
         n_clamped=int((kind == Kind.CLAMPED).sum()),
         dx=dx,
         wall_s=round(wall, 1),
@@ -135,11 +136,12 @@ def main():
     p.add_argument("--n", type=int, nargs="+", default=[8])
     p.add_argument("--variant", nargs="+", default=["base"])
     p.add_argument("--periods", type=float, default=8.0)
+    p.add_argument("--h-factor", type=float, default=None)
     p.add_argument("--out", default=None)
     args = p.parse_args()
     for n in args.n:
         for v in args.variant:
-            row = run(n, v, args.periods)
+            row = run(n, v, args.periods, args.h_factor)
             if args.out:
                 with open(args.out, "a") as f:
                     f.write(json.dumps(row) + "\n")
