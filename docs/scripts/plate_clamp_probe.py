@@ -1,0 +1,151 @@
+"""Where the dry clamped plate's extra compliance comes from (issue 31): the deflection
+profile along the span against Euler-Bernoulli, and variants of the clamp.
+
+    python docs/scripts/plate_clamp_probe.py --n 8 --variant base zero_clamp_stress clamp1
+
+Each run: the dry plate of ``validate_fsi.py --dry-only`` (second-order gradient),
+``--periods`` dry periods undamped; prints the mid-span w / w_ref (mid-range and mean over
+the second half), the column-mean profile (time mean over the second half) over
+w_EB(x) = 16 w_ref (x/L)^2 (1 - x/L)^2, and a least-squares fit
+w = c (x + e)^2 (L + e - x)^2 (effective span L + 2 e, compliance c over Euler-Bernoulli's).
+Variants: ``base``; ``zero_clamp_stress`` (the clamped particles' P = 0, i.e. F = I,
+in the force sum); ``clampK`` (only the K clamped columns nearest each end kept).
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib.util
+import json
+import pathlib
+import time
+
+import jax
+import numpy as np
+
+import sphjax
+from sphjax.cases.fsi import hydrostatic_fsi_plate, midspan_deflection
+from sphjax.core.state import Kind
+from sphjax.physics.solid import system as solid_system
+
+HERE = pathlib.Path(__file__).resolve().parent
+_spec = importlib.util.spec_from_file_location("validate_fsi", HERE / "validate_fsi.py")
+vf = importlib.util.module_from_spec(_spec)
+_spec.loader.exec_module(vf)
+
+_update_solid = solid_system.update_solid
+
+
+def _zero_clamped_stress(system, solid, pairs, ctx, reference=None):
+    """update_solid with the clamped particles' stress set to zero (F = I for SVK)."""
+    out = _update_solid(system, solid, pairs, ctx, reference)
+    free = solid["free"][:, None, None]
+    for key in ("P", "PL0", "PL0q"):
+        if key in out:
+            out[key] = out[key] * free
+    return out
+
+
+def trimmed(case, keep_columns):
+    """``case`` with only the ``keep_columns`` clamped columns nearest each end."""
+    X = np.asarray(case.state.reference_position)
+    kind = np.asarray(case.state.kind)
+    dx, L = case.info["dx"], case.info["length"]
+    dist = np.where(X[:, 0] < 0.5 * L, -X[:, 0], X[:, 0] - L)
+    keep = (kind != Kind.CLAMPED) | (dist < keep_columns * dx)
+    n_all = len(kind)
+
+    def take(a):
+        return a[keep] if getattr(a, "ndim", 0) >= 1 and a.shape[0] == n_all else a
+
+    state = jax.tree_util.tree_map(take, case.state)
+    old = np.flatnonzero(keep)
+    midspan = tuple(int(np.searchsorted(old, i)) for i in case.info["midspan_indices"])
+    return case.replace(state=state, info=dict(case.info, midspan_indices=midspan))
+
+
+def inward(case, columns):
+    """``case`` with its first ``columns`` free columns at each end clamped too."""
+    X = np.asarray(case.state.reference_position)
+    kind = np.asarray(case.state.kind)
+    dx, L = case.info["dx"], case.info["length"]
+    near = (X[:, 0] < columns * dx) | (X[:, 0] > L - columns * dx)
+    kind = np.where((kind == Kind.SOLID) & near, Kind.CLAMPED, kind).astype(kind.dtype)
+    return case.replace(state=case.state.replace(kind=kind))
+
+
+def run(n, variant, periods, h_factor=None):
+    zero = variant == "zero_clamp_stress"
+    solid_system.update_solid = _zero_clamped_stress if zero else _update_solid
+    case = hydrostatic_fsi_plate(n=n, depth=0.5, h_factor=h_factor)
+    case = vf.dry_case(vf.with_gradient_correction(case, "second_order"))
+    if variant.startswith("clamp"):
+        case = trimmed(case, int(variant[5:]))
+    if variant.startswith("inward"):
+        case = inward(case, int(variant[6:]))
+    kind = np.asarray(case.state.kind)
+    n_steps = int(round(periods * case.info["dry_period"] / case.dt))
+    start = time.perf_counter()
+    traj = sphjax.simulate(case, n_steps=n_steps, save_every=max(1, n_steps // 200))
+    wall = time.perf_counter() - start
+    ref = case.info["reference_deflection"]
+    wt = np.asarray(midspan_deflection(traj, case)) / ref
+    late = wt[len(wt) // 2 :]
+    pos = np.asarray(traj.states.position)
+    x = pos[len(pos) // 2 :].mean(axis=0)
+    X = np.asarray(case.state.reference_position)
+    free = (X[:, 0] > 0) & (X[:, 0] < case.info["length"]) & (kind >= Kind.SOLID)
+    L, dx = case.info["length"], case.info["dx"]
+    cols = np.round(X[free, 0] / dx - 0.5).astype(int)
+    nx = cols.max() + 1
+    w = np.bincount(cols, x[free, 1] - X[free, 1], nx) / np.bincount(cols, None, nx)
+    xc = (np.arange(nx) + 0.5) * dx
+    s = xc / L
+    w_eb = 16 * ref * s**2 * (1 - s) ** 2
+    best = None
+    for e in np.linspace(-3 * dx, 3 * dx, 601):
+        g = (xc + e) ** 2 * (L + e - xc) ** 2
+        c = float(g @ w / (g @ g))
+        r = float(np.sum((w - c * g) ** 2))
+        if best is None or r < best[0]:
+            best = (r, e, c)
+    r, e, c = best
+    ratio = w / w_eb
+    pick = [0, 1, 2, 3, 5, 8, nx // 8, nx // 4, 3 * nx // 8, nx // 2]
+    row = dict(
+        n=n,
+        variant=variant,
+        h_factor=h_factor,
+        n_clamped=int((kind == Kind.CLAMPED).sum()),
+        dx=dx,
+        wall_s=round(wall, 1),
+        w_mid_range=float(0.5 * (late.max() + late.min())),
+        w_mid_mean=float(late.mean()),
+        profile_ratio={f"{xc[i] / dx:.1f}dx": round(float(ratio[i]), 4) for i in pick},
+        fit_e_over_dx=round(float(e / dx), 3),
+        fit_compliance_ratio=round(float(c / (16 * ref / L**4)), 4),
+        fit_rel_resid=float(np.sqrt(r / np.sum(w**2))),
+        fit0_compliance_ratio=round(float((w_eb @ w) / (w_eb @ w_eb)), 4),
+    )
+    print(json.dumps(row), flush=True)
+    return row
+
+
+def main():
+    p = argparse.ArgumentParser()
+    p.add_argument("--n", type=int, nargs="+", default=[8])
+    p.add_argument("--variant", nargs="+", default=["base"])
+    p.add_argument("--periods", type=float, default=8.0)
+    p.add_argument("--h-factor", type=float, default=None)
+    p.add_argument("--out", default=None)
+    args = p.parse_args()
+    for n in args.n:
+        for v in args.variant:
+            row = run(n, v, args.periods, args.h_factor)
+            if args.out:
+                with open(args.out, "a") as f:
+                    f.write(json.dumps(row) + "\n")
+
+
+if __name__ == "__main__":
+    main()
