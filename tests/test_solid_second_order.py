@@ -158,6 +158,20 @@ def test_gradient_correction_is_a_named_choice():
     assert second[0] == pytest.approx(0.5 * first[0])
 
 
+def test_a_solid_two_particles_thick_is_refused_with_the_reason():
+    """At two particles through, the second-order moment matrix is singular: the run is
+    refused before its first step, naming the choice and the fix (before: a non-finite
+    acceleration at step 0)."""
+    _, state, _, model, params = _plate(2, "second_order")
+    case = sphjax.Case("plate", state, model, params, 1e-4, 1e-3)
+    with pytest.raises(ValueError, match="needs at least three particles through the solid"):
+        sphjax.simulate(case, n_steps=2)
+    # the first-order gradient runs the same plate
+    first = _plate(2, "first_order")
+    ok = sphjax.Case("plate", first[1], first[3], first[4], 1e-4, 1e-3)
+    assert np.isfinite(np.asarray(sphjax.simulate(ok, n_steps=2).final.position)).all()
+
+
 def _second_order_case(case):
     systems = tuple(
         s.replace(gradient_correction="second_order") if isinstance(s, SolidSystem) else s

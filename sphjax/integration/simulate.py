@@ -533,6 +533,8 @@ def simulate(
     # the solids' reference quantities (L0), once per run, from the (maybe traced) state
     if not all(system.current_configuration for system in model.systems):
         neighbors = _with_reference(state, neighbors, model)
+        if not traced:
+            _check_reference(neighbors, model, order)
     if traced:
         if model.pair_adjoint:
             refuse_second_order(params, state, dt)
@@ -823,6 +825,33 @@ def _check_finite(state: State) -> None:
             raise ValueError(
                 f"state.{name}: particle {i} has a non-finite value {x[i].tolist()}; "
                 f"every initial {name} must be a finite number"
+            )
+
+
+def _check_reference(neighbors, model: Model, order) -> None:
+    """Reject a run whose solids' reference quantities (``L0``, eq. 15, or the
+    second-order gradient's ``G``) are not finite: their moment matrix is singular, as
+    the second-order gradient's is with fewer than three particles through a solid."""
+    for i, fields in (neighbors.reference or {}).items():
+        for name, value in fields.items():
+            if name == "geometry":
+                continue
+            x = np.asarray(value)
+            bad = ~np.isfinite(x.reshape(x.shape[0], -1)).all(axis=-1)
+            if not bad.any():
+                continue
+            row = neighbors.blocks[i][0] + int(np.argmax(bad))
+            particle = row if order is None else int(order[row])
+            system = model.systems[i]
+            hint = (
+                "gradient_correction='second_order' needs at least three particles through "
+                "the solid in every direction; use 'first_order' or a finer resolution"
+                if getattr(system, "gradient_correction", None) == "second_order"
+                else "check the solid's reference positions and volumes"
+            )
+            raise ValueError(
+                f"{type(system).__name__}: the reference-configuration matrix of particle "
+                f"{particle} is singular ({int(bad.sum())} particles in all): {hint}"
             )
 
 
