@@ -3,7 +3,9 @@ compiled programs are kept in a persistent cache shared by the test workers and 
 process they start (CLI runs, notebook kernels), so a program compiled once in a run is
 not compiled again."""
 
+import gc
 import os
+import warnings
 from pathlib import Path
 
 import jax
@@ -59,3 +61,36 @@ def float64():
     jax.config.update("jax_enable_x64", True)
     yield
     jax.config.update("jax_enable_x64", previous)
+
+
+# Every program XLA:CPU compiles maps its code into the process in about 20 separate memory
+# regions, released only when the program is dropped from JAX's caches.  A test worker runs
+# hundreds of test files in one process: it reached Linux's limit of 65530 maps per
+# process (vm.max_map_count) near the end of the suite (64916 measured) and died in the
+# next mmap (SIGSEGV or SIGABRT, wherever it happened), and pytest-xdist, with whole files
+# per worker, then waits forever for the lost worker's files.  So the compiled programs are
+# dropped after each test file: a later file that needs one again reads it back from the
+# persistent cache above.
+MAP_LIMIT = 65530
+
+
+def _memory_maps() -> int | None:
+    try:
+        with open("/proc/self/maps") as maps:
+            return sum(1 for _ in maps)
+    except OSError:  # not Linux
+        return None
+
+
+@pytest.fixture(autouse=True, scope="module")
+def compiled_programs_dropped_after_each_file():
+    yield
+    jax.clear_caches()
+    gc.collect()
+    maps = _memory_maps()
+    if maps is not None and maps > MAP_LIMIT // 2:
+        warnings.warn(
+            f"this test worker holds {maps} memory maps after clearing JAX's caches "
+            f"(the process limit is {MAP_LIMIT}); something keeps compiled programs alive",
+            stacklevel=1,
+        )
