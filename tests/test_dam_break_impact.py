@@ -15,6 +15,7 @@ exp_pressure_sensor_P1.csv): ``(t sqrt(g / H), p / (rho0 g H))``.
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import jax
 import numpy as np
@@ -48,11 +49,12 @@ BUCHNER_P1 = [
 ]
 ARRIVAL = 2.49  # first time P1 reads more than 0.15 rho0 g H
 # De Courcy et al. (2024), "Incompressible delta-SPH via artificial compressibility",
-# CMAME 420, 116700, H/dx = 400: wall pressure at their sensors P3 (y = 0.06 m) and P4
-# (y = 0.16 m, Buchner's P1 height), as digitised in TrixiParticles.jl
-# (validation/dam_break_2d/decourcy_pressure_sensor_P3.csv, _P4.csv), mean over
-# t sqrt(g/H) in [2.8, 3.5] of the digitised curves (linear interpolation).
-DE_COURCY_PLATEAU = {0.06: 0.970, 0.16: 0.185}
+# CMAME 420, 116700, H/dx = 400: wall pressure at their sensors P1 to P4 (y = 0.006,
+# 0.030, 0.060 m and 0.16 m, Buchner's P1 height), as digitised in TrixiParticles.jl
+# (validation/dam_break_2d/decourcy_pressure_sensor_P1.csv to _P4.csv; a copy in
+# docs/data/decourcy_2024_dam_break_wall_pressure.csv), mean over t sqrt(g/H) in
+# [2.8, 3.5] of the digitised curves (linear interpolation).
+DE_COURCY_PLATEAU = {0.006: 1.260, 0.03: 1.160, 0.06: 0.970, 0.16: 0.185}
 
 
 @pytest.fixture(scope="module")
@@ -114,10 +116,12 @@ def test_pressure_after_impact_matches_experiment(p1):
 @pytest.mark.parametrize("height", sorted(DE_COURCY_PLATEAU))
 def test_wall_pressure_after_impact_matches_high_resolution_sph(p1, height):
     """The mean wall pressure over t sqrt(g/H) in [2.8, 3.5] at De Courcy et al.'s (2024)
-    sensors P3 (y = 0.06 m) and P4 (0.16 m) within 10 % of their incompressible
+    four sensors (y = 0.006, 0.030, 0.060 and 0.16 m) within 10 % of their incompressible
     delta-SPH at H/dx = 400 (a numerical reference: the experiment's P1 at 0.16 m is
     three times higher than both, docs/validation_fluid.md).  Measured at this size
-    (H/dx = 15): -4.2 % and +7.6 %; at H/dx = 20: +2.2 % and +1.6 %."""
+    (H/dx = 15, float64): +2.6, +3.9, -4.2 and +7.4 %; the resolution study
+    (docs/scripts/validate_impact.py, float32) is within 3 % at every sensor at H/dx = 60
+    (+1.6, +1.5, +2.9, -1.0 %)."""
     T, p = p1
     window = (T >= 2.8) & (T <= 3.5)
     assert np.mean(p[height][window]) == pytest.approx(DE_COURCY_PLATEAU[height], rel=0.1)
@@ -144,3 +148,17 @@ def test_probe_reads_hydrostatic_pressure_in_a_tank_at_rest():
 def test_bad_column_height_is_named(bad):
     with pytest.raises(ValueError, match="^column_height must be a positive number"):
         sphjax.cases.dam_break(n=4, column_height=bad)
+
+
+def test_the_reference_plateaus_are_the_data_files():
+    """The De Courcy et al. plateaus above are the means of the curves in docs/data (the
+    copy the validation script compares with), sensor by sensor."""
+    path = (
+        Path(__file__).resolve().parents[1] / "docs/data/decourcy_2024_dam_break_wall_pressure.csv"
+    )
+    rows = [line.split(",") for line in path.read_text().splitlines() if line[:1] == "P"]
+    window = np.linspace(2.8, 3.5, 701)
+    for y, expected in DE_COURCY_PLATEAU.items():
+        t, p = np.array([(float(r[2]), float(r[3])) for r in rows if float(r[1]) == y]).T
+        assert len(t) > 300
+        assert np.mean(np.interp(window, t, p)) == pytest.approx(expected, abs=1e-3)
