@@ -21,8 +21,9 @@ there is skipped unless ``--force``, so an interrupted sweep resumes.
 `sphjax.cases.settling_disk` (``--case settling``): the disk's velocity, sampled every
 0.01 s to 0.6 s (its centre then still about 3 diameters above the floor); its largest
 speed, of the running mean over 0.05 s (the acoustic ripple smoothed), gives its largest
-Reynolds number ``Re = speed d / nu``, against the reference's, about 17
-(``sphjax.cases.rigid.SETTLING_DISK_REYNOLDS``).  One line per run in
+Reynolds number on the disk's density, ``Re = rho_s speed d / mu``, against the
+reference's, about 17 (``sphjax.cases.rigid.SETTLING_DISK_REYNOLDS``), and the speed
+against that of the resolved immersed-boundary run IBLBM_SPEED.  One line per run in
 docs/data/settling_disk.jsonl (wall and CPU time, float32 or float64, the sampled
 velocity); ``--figure`` draws docs/figures/settling_disk.png from it.
 """
@@ -51,6 +52,12 @@ SETTLING = DOCS / "data" / "settling_disk.jsonl"
 #: ripple (about 0.03 s: a sound wave across the channel) is over SMOOTH samples (0.05 s)
 SETTLED = 0.3
 SMOOTH = 5
+#: the largest settling speed (cm/s) of the same set-up in the immersed-boundary lattice
+#: Boltzmann run of github.com/mulgae-life/iblbm-mechanism-resolved (H. Jo, Physics of
+#: Fluids 2026), data/single_particle_sedimentation/method_matrix/rho125/
+#: df_bgk_verlet_explicit_history/status.json: "Re_standard_peak": 13.93 (``|V| d / nu``,
+#: 160 lattice spacings across the disk), i.e. 13.93 * 0.1 / 0.25 cm/s
+IBLBM_SPEED = 13.93 * 0.1 / 0.25
 
 
 def settling_speed(t, vy):
@@ -173,8 +180,8 @@ def run_settling_piece(case, n, t_end, piece):
     return t, np.stack([vx, vy], -1), np.stack([np.zeros_like(y), y], -1), wall, cpu
 
 
-def run_settling(n, t_end, piece=None):
-    case = settling_disk(n=n, t_end=t_end)
+def run_settling(n, t_end, piece=None, sound_speed=None):
+    case = settling_disk(n=n, t_end=t_end, sound_speed=sound_speed)
     if piece is not None:
         result = run_settling_piece(case, n, t_end, piece)
         if result is None:
@@ -191,10 +198,12 @@ def run_settling(n, t_end, piece=None):
         centre = np.asarray(trajectory.states.position)[:, idx].mean(axis=1)
     info = case.info
     speed, mean_speed, spread = settling_speed(t, v[:, 1])
-    reynolds = speed * info["diameter"] / info["kinematic_viscosity"]
+    # on the disk's density, rho_s |V| d / mu (as the reference's)
+    reynolds = info["density_ratio"] * speed * info["diameter"] / info["kinematic_viscosity"]
     return dict(
         n=n,
         t_end=t_end,
+        density_ratio=info["density_ratio"],
         dx=info["dx"],
         dtype=str(jnp.asarray(case.state.position).dtype),
         particles=int(case.state.position.shape[0]),
@@ -202,6 +211,7 @@ def run_settling(n, t_end, piece=None):
         body_area_ratio=info["body_area"] / (np.pi * info["diameter"] ** 2 / 4),
         steps=int(round(t_end / case.dt)),
         sound_speed=float(case.params.sound_speed),
+        sound_speed_set=sound_speed,
         wall_s=round(wall, 1),
         cpu_s=round(cpu, 1),
         load=os.getloadavg()[0],
@@ -211,6 +221,7 @@ def run_settling(n, t_end, piece=None):
         speed_std=spread,
         reynolds=reynolds,
         reynolds_error=reynolds / info["reference_reynolds"] - 1.0,
+        iblbm_error=speed / IBLBM_SPEED - 1.0,
         largest_sideways=float(np.abs(v[:, 0]).max()),
         final_centre_height=float(centre[-1, 1]),
         t=t.round(5).tolist(),
@@ -221,16 +232,18 @@ def run_settling(n, t_end, piece=None):
 def settling_table():
     rows = [json.loads(line) for line in SETTLING.read_text().splitlines()]
     print(
-        "| n | dx cm | particles | disk area | steps | wall s | CPU s | largest speed cm/s | "
-        "largest Re | Re error | mean speed, t >= 0.3 s |"
+        "| n | c0 cm/s | dx cm | particles | disk area | steps | wall s | CPU s | "
+        "largest speed cm/s | largest Re | against 17 | against IB-LBM | "
+        "mean speed, t >= 0.3 s |"
     )
-    print("|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
-    for r in sorted(rows, key=lambda r: r["n"]):
+    print("|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
+    for r in sorted(rows, key=lambda r: (r["n"], r["sound_speed"])):
         print(
-            f"| {r['n']} | {r['dx']:.4f} | {r['particles']} | "
+            f"| {r['n']} | {r['sound_speed']:.0f} | {r['dx']:.4f} | {r['particles']} | "
             f"{100 * (r['body_area_ratio'] - 1):+.1f} % | {r['steps']} | {r['wall_s']:.0f} | "
             f"{r['cpu_s']:.0f} | {r['speed']:.2f} | {r['reynolds']:.2f} | "
-            f"{100 * r['reynolds_error']:+.1f} % | {r['mean_speed']:.2f} ± {r['speed_std']:.2f} |"
+            f"{100 * r['reynolds_error']:+.1f} % | {100 * (r['speed'] / IBLBM_SPEED - 1):+.1f} % | "
+            f"{r['mean_speed']:.2f} ± {r['speed_std']:.2f} |"
         )
 
 
@@ -245,11 +258,14 @@ def settling_figure():
     rows = [json.loads(line) for line in SETTLING.read_text().splitlines()]
     fig, ax = plt.subplots(figsize=(6, 3.6))
     for r in sorted(rows, key=lambda r: r["n"]):
-        ax.plot(r["t"], np.asarray(r["vy"]) * -0.25 / 0.1, label=f"n = {r['n']}")
-    ax.axhline(SETTLING_DISK_REYNOLDS, color="k", ls="--", label="reference, Re ≈ 17")
+        label = f"n = {r['n']}, c0 = {r['sound_speed']:.0f} cm/s"
+        ax.plot(r["t"], -np.asarray(r["vy"]), lw=1, label=label)
+    speed = SETTLING_DISK_REYNOLDS * 0.1 / (1.25 * 0.25)
+    ax.axhline(speed, color="k", ls="--", label="Wang et al. 2008, Re ≈ 17")
+    ax.axhline(IBLBM_SPEED, color="0.4", ls=":", label="IB-LBM run (Jo 2026)")
     ax.axvspan(SETTLED, max(r["t_end"] for r in rows), color="0.9", zorder=0)
     ax.set_xlabel("t (s)")
-    ax.set_ylabel("Re = |V| d / nu")
+    ax.set_ylabel("settling speed (cm/s)")
     ax.legend(loc="lower right", fontsize=8)
     fig.tight_layout()
     out = DOCS / "figures" / "settling_disk.png"
@@ -265,10 +281,11 @@ def settling_main(args):
     if SETTLING.exists() and not args.force:
         for line in SETTLING.read_text().splitlines():
             r = json.loads(line)
-            if (r["n"], r["t_end"]) == (args.n, args.t_end):
+            key = (r["n"], r["t_end"], r.get("sound_speed_set"))
+            if key == (args.n, args.t_end, args.sound_speed):
                 print(f"already there: n={args.n}, t_end={args.t_end}")
                 return
-    row = run_settling(args.n, args.t_end, args.piece)
+    row = run_settling(args.n, args.t_end, args.piece, args.sound_speed)
     if row is None:
         print("run again for the next piece")
         return
@@ -294,6 +311,7 @@ def main():
     parser.add_argument(
         "--piece", type=float, default=None, help="settling: run this many seconds a call"
     )
+    parser.add_argument("--sound-speed", type=float, default=None, help="settling: c0")
     args = parser.parse_args()
     if args.case == "settling":
         args.t_end = 0.6 if args.t_end is None else args.t_end

@@ -289,10 +289,13 @@ def body_bottom(states, case: Case):
     return jnp.mean(position[..., idx, 1], axis=-1) - 0.5 * case.info["body_height"]
 
 
-#: Wang, Fan & Luo (2008), Int. J. Multiphase Flow 34, section 3.1 (Glowinski et al. 2001's
-#: set-up), as quoted in scenarios/sedimentation.py of github.com/mulgae-life/
-#: iblbm-mechanism-resolved (H. Jo, Physics of Fluids 2026): for rho_s / rho_f = 1.25 and
-#: mu = 0.1 g/(cm s), "Re_max ≈ 17" (two significant figures)
+#: The largest Reynolds number of the settling disk, Wang, Fan & Luo (2008), Int. J.
+#: Multiphase Flow 34, section 3.1 (the set-up of Glowinski et al. 2001), for rho_s / rho_f
+#: = 1.25 and mu = 0.1 g/(cm s): "Re_max ≈ 17", as quoted (two significant figures) in
+#: scenarios/sedimentation.py of github.com/mulgae-life/iblbm-mechanism-resolved (H. Jo,
+#: Physics of Fluids 2026), whose comparison with it takes the Reynolds number on the
+#: disk's density, ``Re = rho_s |V| d / mu`` (its "particle basis",
+#: monitor/sedimentation.py)
 SETTLING_DISK_REYNOLDS = 17.0
 
 
@@ -318,8 +321,9 @@ def settling_disk(
     and 6 cm high, its centre ``release_height`` above the floor, in a fluid at rest of
     density 1 g/cm^3 and kinematic viscosity 0.1 cm^2/s, under ``g = 980`` cm/s^2.  It
     accelerates and settles at a nearly constant speed; with the defaults the reference
-    gives a largest Reynolds number ``Re = |V| d / nu`` of about 17
-    (:data:`SETTLING_DISK_REYNOLDS`, ``info["reference_speed"] = Re nu / d``).
+    gives a largest Reynolds number of about 17 (:data:`SETTLING_DISK_REYNOLDS`), on the
+    disk's density, ``Re = rho_s |V| d / mu``: a largest speed
+    ``info["reference_speed"] = Re mu / (rho_s d) = 5.44`` cm/s.
 
     The fluid: Wendland C2, ``h = 1.5 dx``, continuity density with delta-SPH, Tait
     (``gamma = 7``), Morris's laminar viscosity (``Params.kinematic_viscosity``), no
@@ -327,8 +331,8 @@ def settling_disk(
     carries no gravity and no hydrostatic pressure: the disk is given its weight less its
     buoyancy, ``(1 - rho_f / rho_s) g`` (``RigidSystem(buoyant_gravity=...)``), which for
     an incompressible fluid is the same problem, so that the sound speed need only exceed
-    the flow's speeds (``c0 = sound_speed``, default ten times the reference's speed) and
-    not ``sqrt(g H)``.
+    the flow's speeds (``c0 = sound_speed``, default ``10 Re nu / d = 68`` cm/s, 12.5 times
+    the reference's speed) and not ``sqrt(g H)``.
 
     The disk is the particles of the fluid's lattice (``dx = d / n``, the channel's
     centre line on a lattice line) whose centres lie inside the circle, the fluid the
@@ -342,7 +346,7 @@ def settling_disk(
     Args:
       n: particles across the disk's diameter (``dx = diameter / n``; at least 4).
       release_height: the height of the disk's centre above the floor at the start.
-      sound_speed: ``c0``; ``None``: ten times ``info["reference_speed"]``.
+      sound_speed: ``c0``; ``None``: ``10 Re nu / d`` (68 cm/s with the defaults).
     """
     n = check_resolution("n", n, 4)
     d = check_positive("diameter", diameter)
@@ -380,8 +384,8 @@ def settling_disk(
     _, y_c, inside = min(candidates, key=lambda c: c[0])
     centre = np.array([x_c, y_c])
     fluid, body = points[~inside], points[inside]
-    reference_speed = SETTLING_DISK_REYNOLDS * nu / d
-    c0 = 10.0 * reference_speed if sound_speed is None else sound_speed
+    reference_speed = SETTLING_DISK_REYNOLDS * nu / (ratio * d)
+    c0 = 10.0 * SETTLING_DISK_REYNOLDS * nu / d if sound_speed is None else sound_speed
     c0 = check_positive("sound_speed", c0)
 
     kernel, h = WendlandC2(), 1.5 * dx
@@ -441,6 +445,7 @@ def settling_disk(
         initial_centre=tuple(float(c) for c in centre),
         body_area=float(len(body) * cell),
         kinematic_viscosity=nu,
+        density_ratio=ratio,
         reference_reynolds=SETTLING_DISK_REYNOLDS,
         reference_speed=reference_speed,
         body_indices=tuple(int(i) for i in np.flatnonzero(kind == Kind.RIGID)),
