@@ -125,9 +125,11 @@ def table():
         )
 
 
-def _piece_files(n, t_end, piece):
-    stem = pathlib.Path(tempfile.gettempdir()) / f"settling_disk_n{n}_t{t_end}_p{piece}"
-    return stem.with_suffix(".npz"), SETTLING.with_name("settling_disk_pieces.jsonl")
+def _piece_files(n, t_end, piece, c0):
+    name = f"settling_disk_n{n}_t{t_end}_p{piece}_c{c0:g}.npz"
+    return pathlib.Path(tempfile.gettempdir()) / name, SETTLING.with_name(
+        "settling_disk_pieces.jsonl"
+    )
 
 
 def run_settling_piece(case, n, t_end, piece):
@@ -135,11 +137,13 @@ def run_settling_piece(case, n, t_end, piece):
     the temporary directory); the pieces' sampled velocities accumulate in
     docs/data/settling_disk_pieces.jsonl.  ``None`` until the run has reached ``t_end``,
     then ``(t, v, centre, wall, cpu)`` of the whole run."""
-    state_file, pieces = _piece_files(n, t_end, piece)
+    c0 = float(case.params.sound_speed)
+    state_file, pieces = _piece_files(n, t_end, piece, c0)
+    key = (n, t_end, piece, c0)
     done = []
     if pieces.exists():
         done = [json.loads(line) for line in pieces.read_text().splitlines()]
-        done = [r for r in done if (r["n"], r["t_end"], r["piece"]) == (n, t_end, piece)]
+        done = [r for r in done if (r["n"], r["t_end"], r["piece"], r.get("c0", 68.0)) == key]
     t0 = done[-1]["t"][-1] if done else 0.0
     state = None
     if done:
@@ -161,7 +165,7 @@ def run_settling_piece(case, n, t_end, piece):
     idx = np.asarray(case.info["body_indices"])
     centre = np.asarray(trajectory.states.position)[:, idx].mean(axis=1)
     row = dict(
-        n=n, t_end=t_end, piece=piece, wall_s=wall, cpu_s=cpu, t=t.round(6).tolist(),
+        n=n, t_end=t_end, piece=piece, c0=c0, wall_s=wall, cpu_s=cpu, t=t.round(6).tolist(),
         vx=v[:, 0].tolist(), vy=v[:, 1].tolist(), y=centre[:, 1].tolist(),
     )  # fmt: skip
     with pieces.open("a") as out:
@@ -259,7 +263,9 @@ def settling_figure():
     fig, ax = plt.subplots(figsize=(6, 3.6))
     for r in sorted(rows, key=lambda r: r["n"]):
         label = f"n = {r['n']}, c0 = {r['sound_speed']:.0f} cm/s"
-        ax.plot(r["t"], -np.asarray(r["vy"]), lw=1, label=label)
+        colour = {7: "C0", 10: "C1", 14: "C2"}.get(r["n"], "C3")
+        style = "-" if r["sound_speed"] > 100 else ":"
+        ax.plot(r["t"], -np.asarray(r["vy"]), style, color=colour, lw=1.2, label=label)
     speed = SETTLING_DISK_REYNOLDS * 0.1 / (1.25 * 0.25)
     ax.axhline(speed, color="k", ls="--", label="Wang et al. 2008, Re ≈ 17")
     ax.axhline(IBLBM_SPEED, color="0.4", ls=":", label="IB-LBM run (Jo 2026)")
