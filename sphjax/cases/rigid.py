@@ -332,7 +332,7 @@ def settling_disk(
     buoyancy, ``(1 - rho_f / rho_s) g`` (``RigidSystem(buoyant_gravity=...)``), which for
     an incompressible fluid is the same problem, so that the sound speed need only exceed
     the flow's speeds (``c0 = sound_speed``, default ``20 Re nu / d = 136`` cm/s, 25 times
-    the reference's speed: with half that the disk settled 6 % faster,
+    the reference's speed: with half that the disk settled 5-8 % faster,
     docs/validation_rigid.md) and not ``sqrt(g H)``.
 
     The disk is the particles of the fluid's lattice (``dx = d / n``, the channel's
