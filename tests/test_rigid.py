@@ -386,3 +386,10 @@ def test_a_disk_settles_at_the_speed_measured_at_that_resolution():
     assert speed == pytest.approx(SPEED_N4, rel=0.03)
     assert np.max(-v[t < 0.05, 1]) < 0.6 * speed  # it starts from rest (0.51 at 0.04 s)
     assert np.max(np.abs(v[:, 0])) < 0.01 * speed  # straight down the centre line
+
+
+@pytest.mark.parametrize("bad", [(0.0,), (0.0, float("nan")), (0.0, -9.81, 0.0)])
+def test_a_buoyant_gravity_that_is_no_2d_vector_is_refused(bad):
+    with pytest.raises(ValueError, match=r"^RigidSystem.buoyant_gravity must be None or a 2D"):
+        sphjax.RigidSystem(buoyant_gravity=bad)
+    assert sphjax.RigidSystem(buoyant_gravity=[0, -1]).buoyant_gravity == (0.0, -1.0)
