@@ -264,7 +264,7 @@ def settling_figure():
     for r in sorted(rows, key=lambda r: r["n"]):
         label = f"n = {r['n']}, c0 = {r['sound_speed']:.0f} cm/s"
         colour = {7: "C0", 10: "C1", 14: "C2"}.get(r["n"], "C3")
-        style = "-" if r["sound_speed"] > 100 else ":"
+        style = ":" if r["sound_speed"] < 100 else "-" if r["sound_speed"] < 200 else "-."
         ax.plot(r["t"], -np.asarray(r["vy"]), style, color=colour, lw=1.2, label=label)
     speed = SETTLING_DISK_REYNOLDS * 0.1 / (1.25 * 0.25)
     ax.axhline(speed, color="k", ls="--", label="Wang et al. 2008, Re ≈ 17")
