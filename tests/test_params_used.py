@@ -36,6 +36,16 @@ RIGID_CONTACT = (
     "penalty_alpha",
 )
 RIGID = (*RIGID_CONTACT, *CONTACT)
+# the settling disk: Morris's viscosity and no artificial one, no wall contact
+SETTLING = (
+    "artificial_alpha",
+    "artificial_beta",
+    "transport_pressure",
+    "young_modulus",
+    "poisson_ratio",
+    "penalty_alpha",
+    *CONTACT,
+)
 
 # case -> (smallest resolution that builds, the fields its model does not read)
 UNUSED = {
@@ -58,6 +68,7 @@ UNUSED = {
     "dam_break_elastic_obstacle": (2, FSI),
     "floating_body": (4, RIGID),
     "sinking_body": (4, RIGID_CONTACT),
+    "settling_disk": (4, SETTLING),
     "channel_flow": (4, MORRIS_WALLS),
 }
 

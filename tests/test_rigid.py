@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 import sphjax
-from sphjax.cases import body_bottom, floating_body, sinking_body
+from sphjax.cases import body_bottom, body_velocity, floating_body, settling_disk, sinking_body
 from sphjax.cli import main
 from sphjax.integration.stepper import stepper_for
 from sphjax.io import read_trajectory
@@ -22,6 +22,10 @@ from sphjax.physics.interactions import rigid_wall
 from sphjax.physics.pairs import Geometry
 from sphjax.physics.rhs import Context, build_neighbors, update_stage, with_reference
 from sphjax.physics.rigid.system import rigid_acceleration, rigid_motion
+
+#: the settling disk's mean speed over 0.2-0.3 s at n = 4 (cm/s, float64, c0 = 136 cm/s),
+#: measured
+SPEED_N4 = 5.347
 
 
 def _body(seed=0, n=9):
@@ -339,3 +343,53 @@ def test_the_contact_params_default_to_the_case_values_and_act_only_with_wall_co
             floating.params.replace(**{name: 1.0})
         with pytest.raises(sphjax.UnusedParameterError, match=message.removesuffix("$")):
             jax.grad(lambda v, name=name: floating.params.replace(**{name: v}).gravity[1])(1.0)
+
+
+@pytest.mark.parametrize("density_ratio", [1.25, 1.5])
+def test_a_settling_disk_starts_with_its_weight_less_its_buoyancy(density_ratio):
+    """The settling disk's fluid carries no gravity (``RigidSystem(buoyant_gravity=...)``):
+    at rest at its reference density it has no pressure and no viscous stress, so the
+    disk's first acceleration is its weight less its buoyancy per unit mass,
+    ``(1 - rho_f / rho_s) g`` straight down, exactly (to round-off), and the fluid's none;
+    and the model reads the fluid's density for the body."""
+    case = settling_disk(n=4, density_ratio=density_ratio)
+    assert "reference_density" in case.model.systems[2].parameters()
+    neighbors = with_reference(case.state, build_neighbors(case.state, case.model), case.model)
+    state = _init(case.state, neighbors, case.model, case.params)
+    a = np.asarray(state.acceleration)
+    body = np.asarray(case.info["body_indices"])
+    expected = -(1.0 - 1.0 / density_ratio) * 980.0
+    np.testing.assert_allclose(a[body, 1], expected, rtol=1e-12)
+    np.testing.assert_allclose(a[body, 0], 0.0, atol=1e-12 * 980.0)
+    fluid = np.asarray(case.state.kind) == sphjax.Kind.FLUID
+    assert np.max(np.abs(a[fluid])) < 1e-12 * 980.0
+
+
+def test_a_disk_settles_at_the_speed_measured_at_that_resolution():
+    """The settling disk (Glowinski et al. 2001; Wang, Fan & Luo 2008, section 3.1: rho_s /
+    rho_f = 1.25, d = 0.25 cm in a channel 2 cm wide, nu = 0.1 cm^2/s; largest Reynolds
+    number about 17 on the disk's density, a largest speed of 5.44 cm/s) at the coarsest
+    resolution, 4 particles across its diameter, to 0.3 s: it accelerates from rest (at
+    0.04 s half its final speed), then settles straight down the centre line.  Its mean
+    speed over 0.2-0.3 s is the one measured at this resolution, SPEED_N4 (float64, the
+    case's c0 = 136 cm/s), within 3 %: over those 0.1 s it still rises by about 4 % and
+    ripples by +-3 % (sound across the channel), so a change in the discretisation of a
+    few per cent fails.  (That mean, 5.35 cm/s, is 2 % below the reference's largest speed
+    while still rising; docs/validation_rigid.md compares n = 7 to 14 run to 0.6 s.)"""
+    case = settling_disk(n=4, t_end=0.3)
+    save_every = round(0.01 / case.dt)
+    n_steps = int(round(case.t_end / case.dt)) // save_every * save_every
+    trajectory = sphjax.simulate(case, n_steps=n_steps, save_every=save_every)
+    t = np.asarray(trajectory.times)
+    v = np.asarray(body_velocity(trajectory.states, case))
+    speed = -float(v[t >= 0.2, 1].mean())
+    assert speed == pytest.approx(SPEED_N4, rel=0.03)
+    assert np.max(-v[t < 0.05, 1]) < 0.6 * speed  # it starts from rest (0.51 at 0.04 s)
+    assert np.max(np.abs(v[:, 0])) < 0.01 * speed  # straight down the centre line
+
+
+@pytest.mark.parametrize("bad", [(0.0,), (0.0, float("nan")), (0.0, -9.81, 0.0)])
+def test_a_buoyant_gravity_that_is_no_2d_vector_is_refused(bad):
+    with pytest.raises(ValueError, match=r"^RigidSystem.buoyant_gravity must be None or a 2D"):
+        sphjax.RigidSystem(buoyant_gravity=bad)
+    assert sphjax.RigidSystem(buoyant_gravity=[0, -1]).buoyant_gravity == (0.0, -1.0)

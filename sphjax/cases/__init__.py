@@ -39,7 +39,13 @@ from sphjax.cases.fsi import (
     midspan_deflection,
     plate_deflection_reference,
 )
-from sphjax.cases.rigid import body_bottom, floating_body, sinking_body
+from sphjax.cases.rigid import (
+    body_bottom,
+    body_velocity,
+    floating_body,
+    settling_disk,
+    sinking_body,
+)
 from sphjax.cases.setup_file import SetupError, from_toml
 from sphjax.cases.solid import (
     oscillating_plate,
@@ -83,6 +89,7 @@ CASES = {
     "dam_break_elastic_obstacle": dam_break_elastic_obstacle,
     "floating_body": floating_body,
     "sinking_body": sinking_body,
+    "settling_disk": settling_disk,
     "channel_flow": channel_flow,
 }
 
@@ -158,6 +165,8 @@ __all__ = [
     "floating_body",
     "sinking_body",
     "body_bottom",
+    "settling_disk",
+    "body_velocity",
     "channel_flow",
     "channel_profile",
     "channel_startup_profile",

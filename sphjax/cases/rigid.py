@@ -287,3 +287,183 @@ def body_bottom(states, case: Case):
     position = jnp.asarray(getattr(states, "position", states))
     idx = jnp.asarray(case.info["body_indices"])
     return jnp.mean(position[..., idx, 1], axis=-1) - 0.5 * case.info["body_height"]
+
+
+#: The largest Reynolds number of the settling disk, Wang, Fan & Luo (2008), Int. J.
+#: Multiphase Flow 34, section 3.1 (the set-up of Glowinski et al. 2001), for rho_s / rho_f
+#: = 1.25 and mu = 0.1 g/(cm s): "Re_max ≈ 17", as quoted (two significant figures) in
+#: scenarios/sedimentation.py of github.com/mulgae-life/iblbm-mechanism-resolved (H. Jo,
+#: Physics of Fluids 2026), whose comparison with it takes the Reynolds number on the
+#: disk's density, ``Re = rho_s |V| d / mu`` (its "particle basis",
+#: monitor/sedimentation.py)
+SETTLING_DISK_REYNOLDS = 17.0
+
+
+def settling_disk(
+    n: int = 10,
+    diameter: float = 0.25,
+    channel_width: float = 2.0,
+    channel_height: float = 6.0,
+    release_height: float = 4.0,
+    density_ratio: float = 1.25,
+    fluid_density: float = 1.0,
+    kinematic_viscosity: float = 0.1,
+    gravity: float = 980.0,
+    sound_speed: float | None = None,
+    t_end: float = 0.6,
+) -> Case:
+    """A circular disk denser than the fluid settling in a closed vertical channel (2D),
+    the sedimentation benchmark of Glowinski and co-authors (2001) and Wang, Fan & Luo
+    (2008), in CGS units.
+
+    A disk of diameter ``d = 0.25`` cm and density ``density_ratio`` times the fluid's
+    (``Params.solid_density``) starts at rest on the centre line of a channel 2 cm wide
+    and 6 cm high, its centre ``release_height`` above the floor, in a fluid at rest of
+    density 1 g/cm^3 and kinematic viscosity 0.1 cm^2/s, under ``g = 980`` cm/s^2.  It
+    accelerates and settles at a nearly constant speed; with the defaults the reference
+    gives a largest Reynolds number of about 17 (:data:`SETTLING_DISK_REYNOLDS`), on the
+    disk's density, ``Re = rho_s |V| d / mu``: a largest speed
+    ``info["reference_speed"] = Re mu / (rho_s d) = 5.44`` cm/s.
+
+    The fluid: Wendland C2, ``h = 1.5 dx``, continuity density with delta-SPH, Tait
+    (``gamma = 7``), Morris's laminar viscosity (``Params.kinematic_viscosity``), no
+    artificial viscosity; the channel's walls (Adami) and the disk no-slip.  The fluid
+    carries no gravity and no hydrostatic pressure: the disk is given its weight less its
+    buoyancy, ``(1 - rho_f / rho_s) g`` (``RigidSystem(buoyant_gravity=...)``), which for
+    an incompressible fluid is the same problem, so that the sound speed need only exceed
+    the flow's speeds (``c0 = sound_speed``, default ``20 Re nu / d = 136`` cm/s, 25 times
+    the reference's speed: with half that the disk settled 5-8 % faster,
+    docs/validation_rigid.md) and not ``sqrt(g H)``.
+
+    The disk is the particles of the fluid's lattice (``dx = d / n``, the channel's
+    centre line on a lattice line) whose centres lie inside the circle, the fluid the
+    rest: one lattice, no gaps or overlaps between the disk and the fluid, so that the
+    fluid sees a boundary as regular as the walls (concentric rings would fit the circle
+    better but leave the fluid next to the disk unevenly spaced).  The disk's centre is
+    on a lattice line or half way between two, whichever gives the particles an area
+    closer to the circle's; its mass and area are its particles' (``info["body_area"]``
+    against ``pi d^2 / 4``: within 1.3 % for ``n`` = 7, 10, 14).
+
+    Args:
+      n: particles across the disk's diameter (``dx = diameter / n``; at least 4).
+      release_height: the height of the disk's centre above the floor at the start.
+      sound_speed: ``c0``; ``None``: ``20 Re nu / d`` (136 cm/s with the defaults).
+    """
+    n = check_resolution("n", n, 4)
+    d = check_positive("diameter", diameter)
+    W = check_positive("channel_width", channel_width)
+    H = check_positive("channel_height", channel_height)
+    y0 = check_positive("release_height", release_height)
+    ratio = check_positive("density_ratio", density_ratio)
+    if not ratio > 1.0:
+        raise ValueError(
+            f"density_ratio must exceed 1 for the disk to settle, got {ratio}; for a body "
+            "that floats use sphjax.cases.floating_body"
+        )
+    rho_f = check_positive("fluid_density", fluid_density)
+    nu = check_positive("kinematic_viscosity", kinematic_viscosity)
+    g = check_positive("gravity", gravity)
+    dx = d / n
+    W, H = dx * round(W / dx), dx * round(H / dx)
+    if not d < W:
+        raise ValueError(f"diameter = {d:g} must be below channel_width = {W:g}")
+    if not d / 2 < y0 < H - d / 2:
+        raise ValueError(
+            f"release_height must put the disk inside the channel: between {d / 2:g} and "
+            f"{H - d / 2:g}, got {y0:g}"
+        )
+    # the centre on the centre line, a lattice line; vertically on a lattice line or half
+    # way between two, whichever puts the area of the particles inside the circle closer
+    # to the circle's (within 1.3 % for n = 7, 10, 14; 3.5 % at worst for n >= 8)
+    points = lattice([0.0, 0.0], [W, H], dx)
+    x_c = dx * round(W / (2 * dx))
+    candidates = []
+    for y_c in (dx * round(y0 / dx), dx * (math.floor(y0 / dx) + 0.5)):
+        inside = np.linalg.norm(points - np.array([x_c, y_c]), axis=-1) < d / 2
+        error = abs(int(inside.sum()) * dx * dx - math.pi * d * d / 4)
+        candidates.append((error, y_c, inside))
+    _, y_c, inside = min(candidates, key=lambda c: c[0])
+    centre = np.array([x_c, y_c])
+    fluid, body = points[~inside], points[inside]
+    reference_speed = SETTLING_DISK_REYNOLDS * nu / (ratio * d)
+    c0 = 20.0 * SETTLING_DISK_REYNOLDS * nu / d if sound_speed is None else sound_speed
+    c0 = check_positive("sound_speed", c0)
+
+    kernel, h = WendlandC2(), 1.5 * dx
+    layers = wall_layers(kernel.support * h, dx)
+    walls = box_walls([0.0, 0.0], [W, H], dx, layers)
+    x = np.concatenate([fluid, walls, body])
+    kind = np.concatenate(
+        [
+            np.full(len(fluid), Kind.FLUID),
+            np.full(len(walls), Kind.WALL),
+            np.full(len(body), Kind.RIGID),
+        ]
+    ).astype(np.int32)
+    is_body = jnp.asarray(kind == Kind.RIGID)
+    params = make_params(
+        2,
+        gravity=(0.0, 0.0),
+        reference_density=rho_f,
+        sound_speed=c0,
+        kinematic_viscosity=nu,
+        solid_density=ratio * rho_f,
+    )
+    cell = dx * dx
+
+    def initial_state(p):
+        """The fluid at rest at its reference density (no hydrostatic pressure), masses
+        ``rho_f dx^2``; the disk's particles at its density ``p.solid_density``."""
+        rho0 = p.reference_density
+        rho = jnp.where(is_body, p.solid_density, rho0) * jnp.ones(len(x))
+        mass = rho * cell
+        return make_state(x, 0.0, rho, mass, kind, volume=cell)
+
+    margin = (layers + 2) * dx
+    domain = Domain((-margin, -margin), (W + margin, H + margin), (False, False))
+    model = Model(
+        dim=2,
+        smoothing_length=h,
+        kernel=kernel,
+        domain=domain,
+        systems=(
+            fluid_system(
+                density="continuity",
+                gamma=GAMMA,
+                physical_viscosity=True,
+                density_diffusion="molteni",
+            ),
+            wall_system("no_slip"),
+            RigidSystem(SolidBoundary(no_slip=True), buoyant_gravity=(0.0, -g)),
+        ),
+    )
+    info = dict(
+        n=n,
+        dx=dx,
+        diameter=d,
+        channel_width=W,
+        channel_height=H,
+        initial_centre=tuple(float(c) for c in centre),
+        body_area=float(len(body) * cell),
+        kinematic_viscosity=nu,
+        density_ratio=ratio,
+        reference_reynolds=SETTLING_DISK_REYNOLDS,
+        reference_speed=reference_speed,
+        body_indices=tuple(int(i) for i in np.flatnonzero(kind == Kind.RIGID)),
+    )
+    return finish_case(
+        "settling_disk",
+        initial_state(params),
+        model,
+        params,
+        t_end,
+        info,
+        initial_state=initial_state,
+    )
+
+
+def body_velocity(states, case: Case):
+    """The velocity of the body's centre of mass (its particles, all of one mass):
+    ``[..., 2]``, ``[T, 2]`` for a trajectory's states."""
+    velocity = jnp.asarray(getattr(states, "velocity", states))
+    return jnp.mean(velocity[..., jnp.asarray(case.info["body_indices"]), :], axis=-2)

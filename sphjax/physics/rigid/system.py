@@ -27,11 +27,25 @@ terms; the interactions are the elastic solid's ``fluid_solid`` and ``solid_flui
 registered for this system.  With ``wall_contact``, a spring-dashpot force keeps it off
 the walls (:mod:`sphjax.physics.rigid.contact`, the interaction ``rigid_wall``), summed
 into ``F`` and ``tau`` with the fluid's.  Not yet: contact between bodies, friction, 3D.
+
+With ``buoyant_gravity = g_b``, the fluid carries no hydrostatic pressure (its
+``Params.gravity`` is zero) and the body is given its weight less its buoyancy instead,
+
+    F = sum_i f_i + M g + M (1 - rho0_f / rho_b) g_b,
+
+``rho0_f`` the fluid's reference density (``Params.reference_density``).  For an
+incompressible fluid the two are the same problem: the pressure is the hydrostatic
+``rho0_f g_b . x`` plus a part that obeys the equations without gravity, and the
+hydrostatic part pushes on the body with ``-rho0_f V g_b``, its buoyancy (``V = M /
+rho_b``).  A weakly compressible fluid deep in a tall domain is spared the compression
+of its hydrostatic pressure, ``rho0 |g| H``, which would otherwise need a sound speed
+well above ``sqrt(|g| H)`` (:func:`sphjax.cases.settling_disk`).
 """
 
 from __future__ import annotations
 
 import dataclasses
+import math
 
 import jax.numpy as jnp
 
@@ -67,8 +81,9 @@ def rigid_motion(x, v, m):
 
 def rigid_acceleration(x, v, m, force, gravity):
     """``a_i = A + alpha e_z x r_i - omega^2 r_i`` for the particle forces ``force``
-    (``[n, 2]``) and gravity: the accelerations of the rigid motion the resultant force and
-    torque give the body (module docstring)."""
+    (``[n, 2]``) and gravity (the body's acceleration without a fluid, ``[2]``): the
+    accelerations of the rigid motion the resultant force and torque give the body (module
+    docstring)."""
     _, _, omega, r, I = rigid_motion(x, v, m)
     M = jnp.sum(m)
     A = jnp.sum(force, axis=0) / M + gravity
@@ -89,10 +104,16 @@ class RigidSystem:
       wall_contact: :class:`~sphjax.WallContact`, the contact force that keeps the body
         off the walls, or ``None`` (no contact: a body that reaches a wall passes into it;
         the contact's Params fields are then refused).
+      buoyant_gravity: ``None``, or the gravity ``g_b`` (a tuple, one entry per axis) of a
+        fluid whose hydrostatic pressure is left out (``Params.gravity`` zero): the body
+        is given ``(1 - rho0_f / rho_b) g_b``, its weight less its buoyancy per unit
+        mass, ``rho0_f`` the fluid's ``Params.reference_density`` and ``rho_b`` the
+        body's ``Params.solid_density`` (module docstring).
     """
 
     boundary: SolidBoundary = SolidBoundary()
     wall_contact: WallContact | None = None
+    buoyant_gravity: tuple[float, ...] | None = None
 
     kinds = (Kind.RIGID,)
     current_configuration = True
@@ -111,12 +132,22 @@ class RigidSystem:
                 "RigidSystem.wall_contact must be WallContact(distance=...) or None, got "
                 f"{self.wall_contact!r}"
             )
+        if self.buoyant_gravity is not None:
+            g = tuple(float(c) for c in self.buoyant_gravity)
+            if len(g) != 2 or not all(map(math.isfinite, g)):
+                raise ValueError(
+                    "RigidSystem.buoyant_gravity must be None or a 2D gravity vector such as "
+                    f"(0.0, -9.81), got {self.buoyant_gravity!r}"
+                )
+            object.__setattr__(self, "buoyant_gravity", g)
 
     def parameters(self) -> frozenset[str]:
         """``gravity`` and ``solid_density`` (the body's density); with ``wall_contact``,
-        the contact's fields (:attr:`WallContact.parameters`)."""
+        the contact's fields (:attr:`WallContact.parameters`); with ``buoyant_gravity``,
+        ``reference_density`` (the fluid's, in its buoyancy)."""
         contact = () if self.wall_contact is None else self.wall_contact.parameters
-        return frozenset({"gravity", "solid_density", *contact})
+        buoyancy = () if self.buoyant_gravity is None else ("reference_density",)
+        return frozenset({"gravity", "solid_density", *contact, *buoyancy})
 
     def unused_parameters(self) -> dict[str, str]:
         """The elastic solid's fields (a rigid body has none of them) and, without
@@ -162,10 +193,15 @@ class RigidSystem:
 
     def body_acceleration(self, view: dict, acceleration, params):
         """The rigid motion's particle accelerations (module docstring) for the forces
-        ``m_i a_i`` of the interactions and gravity."""
+        ``m_i a_i`` of the interactions, gravity and, with ``buoyant_gravity``, the body's
+        weight less its buoyancy."""
         m = view["m"]
         force = m[:, None] * acceleration
-        return rigid_acceleration(view["x"], view["v"], m, force, params.gravity)
+        gravity = params.gravity
+        if self.buoyant_gravity is not None:
+            reduced = 1.0 - params.fluid.reference_density / params.solid.solid_density
+            gravity = gravity + reduced * jnp.asarray(self.buoyant_gravity, gravity.dtype)
+        return rigid_acceleration(view["x"], view["v"], m, force, gravity)
 
     def held_kinds(self) -> tuple:
         return ()
