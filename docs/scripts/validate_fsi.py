@@ -87,15 +87,6 @@ def dry_case(case):
     )
 
 
-def with_gradient_correction(case, choice):
-    """``case`` with its solid's ``gradient_correction`` set to ``choice``."""
-    systems = tuple(
-        s.replace(gradient_correction=choice) if isinstance(s, sphjax.SolidSystem) else s
-        for s in case.model.systems
-    )
-    return case.replace(model=case.model.replace(systems=systems))
-
-
 def measure(case, t_end):
     n_steps = int(round(t_end / case.dt))
     start = time.perf_counter()
@@ -152,6 +143,16 @@ def peak(t, u):
     return float(u[i]), float(t[i])
 
 
+def coupling_info(case):
+    """The solid's gradient correction, its steps per step and the step of ``case``."""
+    solid = case.model.system(sphjax.SolidSystem)
+    return dict(
+        gradient_correction=solid.gradient_correction,
+        substeps=solid.substeps,
+        float64=bool(jax.config.jax_enable_x64),
+    )
+
+
 def run_coupled(case, t_end, frames):
     n_steps = int(round(t_end / case.dt))
     save_every = max(1, n_steps // frames)
@@ -168,15 +169,17 @@ def run_coupled(case, t_end, frames):
     return traj, cost
 
 
-def obstacle(n, t_end, frames):
-    """The dam break against the elastic plate: tip curve, energy and momentum budgets."""
+def obstacle(n, t_end, frames, gradient_correction="first_order"):
+    """The dam break against the elastic plate: tip curve, energy and momentum budgets;
+    the plate's ``SolidSystem.gradient_correction`` is ``gradient_correction`` (the
+    case's step computed for it)."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
     jax.config.update("jax_enable_x64", True)
-    case = dam_break_elastic_obstacle(n=n)
+    case = dam_break_elastic_obstacle(n=n, gradient_correction=gradient_correction)
     traj, cost = run_coupled(case, t_end, frames)
     t = np.asarray(traj.states.time)
     tip = np.asarray(observables.tip_displacement(traj, case))
@@ -187,6 +190,7 @@ def obstacle(n, t_end, frames):
     refs = read_series(DATA / "elastic_plate_dam_break_tip_displacement.csv")
     peak_u, peak_t = peak(t, tip[:, 0])
     row = dict(case="dam_break_elastic_obstacle", n=n, dx=case.info["dx"], t_end=t_end, **cost)
+    row.update(coupling_info(case))
     row.update(
         finite=finite,
         tip_peak_ux=peak_u,
@@ -246,7 +250,10 @@ def obstacle(n, t_end, frames):
     ax[2].set(xlabel="t (s)", ylabel="kg m/s per m", title="horizontal momentum")
     ax[2].legend(fontsize=7)
     fig.tight_layout()
-    fig.savefig(FIGURES / ("fsi_obstacle.png" if n == 2 else f"fsi_obstacle_n{n}.png"), dpi=110)
+    name = "fsi_obstacle" if n == 2 else f"fsi_obstacle_n{n}"
+    if gradient_correction != "first_order":
+        name += f"_{gradient_correction}"
+    fig.savefig(FIGURES / f"{name}.png", dpi=110)
     return row
 
 
@@ -257,7 +264,7 @@ def gate_run(case, t_end, frames, exp):
     tip = np.asarray(observables.tip_displacement(traj, case))
     row = dict(case="elastic_gate_dam_break", n=case.info["n"], dx=case.info["dx"], **cost)
     row["t_end"] = t_end
-    row["substeps"] = case.info["substeps"]
+    row.update(coupling_info(case))
     row["young_modulus"] = float(case.params.young_modulus)
     row["poisson_ratio"] = float(case.params.poisson_ratio)
     row["finite"] = bool(np.all(np.isfinite(tip)))
@@ -286,10 +293,11 @@ def gate_run(case, t_end, frames, exp):
 STYLES = ("b", "r--")
 
 
-def gate(n, t_end, frames, substeps, plane_stress=False):
+def gate(n, t_end, frames, substeps, plane_stress=False, gradient_correction="first_order"):
     """The elastic gate's free end against Antoci et al.'s experiment; with
     ``plane_stress`` also the gate of the same E and nu in plane stress
-    (:func:`sphjax.physics.solid.material.plane_stress_equivalent`)."""
+    (:func:`sphjax.physics.solid.material.plane_stress_equivalent`); the gate's
+    ``SolidSystem.gradient_correction`` is ``gradient_correction``."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -298,12 +306,18 @@ def gate(n, t_end, frames, substeps, plane_stress=False):
     from sphjax.physics.solid.material import plane_stress_equivalent
 
     exp = read_series(DATA / "antoci_2007_gate_tip_displacement.csv")
-    case = elastic_gate_dam_break(n=n, substeps=substeps)
+    case = elastic_gate_dam_break(n=n, substeps=substeps, gradient_correction=gradient_correction)
     runs = {"plane strain": gate_run(case, t_end, frames, exp)}
     if plane_stress:
         E, nu = (float(case.params.young_modulus), float(case.params.poisson_ratio))
         E, nu = plane_stress_equivalent(E, nu)
-        sheet = elastic_gate_dam_break(n=n, substeps=substeps, young_modulus=E, poisson_ratio=nu)
+        sheet = elastic_gate_dam_break(
+            n=n,
+            substeps=substeps,
+            young_modulus=E,
+            poisson_ratio=nu,
+            gradient_correction=gradient_correction,
+        )
         runs["plane stress"] = gate_run(sheet, t_end, frames, exp)
     fig, ax = plt.subplots(1, 2, figsize=(10, 4))
     for j, key in enumerate(("ux", "uy")):
@@ -314,7 +328,8 @@ def gate(n, t_end, frames, substeps, plane_stress=False):
         ax[j].set(xlabel="t (s)", ylabel=f"{key} (mm)", title=f"gate free end, {key}")
         ax[j].legend(fontsize=8)
     fig.tight_layout()
-    fig.savefig(FIGURES / "fsi_gate.png", dpi=110)
+    suffix = "" if gradient_correction == "first_order" else f"_n{n}_{gradient_correction}"
+    fig.savefig(FIGURES / f"fsi_gate{suffix}.png", dpi=110)
     row = runs["plane strain"][0]
     if plane_stress:
         row["plane_stress"] = runs["plane stress"][0]
@@ -345,7 +360,8 @@ def main(argv=None):
         "--gradient-correction",
         choices=("first_order", "second_order"),
         default="first_order",
-        help="the solid's reference kernel gradient (SolidSystem.gradient_correction)",
+        help="the solid's reference kernel gradient (SolidSystem.gradient_correction), "
+        "every case; its time step and 'auto' substeps computed for it",
     )
     p.add_argument(
         "--face-weight",
@@ -368,11 +384,13 @@ def main(argv=None):
     if args.case in ("obstacle", "gate"):
         n = args.n[0]
         if args.case == "obstacle":
-            row = obstacle(n, args.t_end or 1.0, args.frames)
+            row = obstacle(n, args.t_end or 1.0, args.frames, args.gradient_correction)
         else:
             k = args.substeps[0]
             k = k if k == "auto" else int(k)
-            row = gate(n, args.t_end or 0.4, args.frames, k, args.plane_stress)
+            row = gate(
+                n, args.t_end or 0.4, args.frames, k, args.plane_stress, args.gradient_correction
+            )
         out = pathlib.Path(args.out or FIGURES / f"fsi_{args.case}.json")
         out.write_text(json.dumps(row, indent=1) + "\n")
         print(json.dumps({k: v for k, v in row.items() if k != "series"}, indent=1))
@@ -392,11 +410,11 @@ def main(argv=None):
     if args.placement == "surface":
         plate.update(face_weight=args.face_weight, clamp_end_columns=not args.free_end_columns)
     for n in args.n:
+        plate["gradient_correction"] = args.gradient_correction
         case = hydrostatic_fsi_plate(n=n, **plate)
-        case = with_gradient_correction(case, args.gradient_correction)
         t_end = args.periods * case.info["dry_period"]
         row = dict(n=n, depth=case.info["depth"], dx=case.info["dx"], t_end=t_end)
-        row.update({k: v for k, v in plate.items() if k != "depth"})
+        row.update({k: v for k, v in plate.items() if k not in ("depth", "gradient_correction")})
         row.update(float64=args.float64, end_columns_clamped=not args.free_end_columns)
         row["face_weight"] = args.face_weight
         row["gradient_correction"] = args.gradient_correction
@@ -410,7 +428,6 @@ def main(argv=None):
         for substeps in [] if args.dry_only else args.substeps:
             k = substeps if substeps == "auto" else int(substeps)
             split = hydrostatic_fsi_plate(n=n, **plate, substeps=k)
-            split = with_gradient_correction(split, args.gradient_correction)
             row["fsi"] = dict(measure(split, t_end), substeps=split.info["substeps"])
             row["fsi"]["dt"] = split.dt
             print(json.dumps(row, default=str)[:400], flush=True)
