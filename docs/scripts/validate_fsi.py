@@ -25,7 +25,14 @@ the plate top's displacement against the published curves
 numbers ``docs/figures/fsi_obstacle.json``.  ``--case gate``: the elastic gate's free end
 against Antoci et al.'s experiment (``docs/data/antoci_2007_gate_tip_displacement.csv``);
 ``docs/figures/fsi_gate.png`` and ``.json``; with ``--plane-stress`` also the gate of the
-same E and nu in plane stress.
+same E and nu in plane stress; ``--outflow-length`` the floor's length past the gate.
+``--gradient-correction second_order`` builds every case with the second-order solid
+gradient (its step and ``"auto"`` substeps computed for it) and is recorded in the output.
+
+    python docs/scripts/validate_fsi.py --case gate --dry-only --n 2 3 4 6 --out gate_dry.jsonl
+
+``--case gate --dry-only``: the gate alone under a uniform sideways load of 100 Pa against
+Euler-Bernoulli's cantilever (:func:`gate_dry`).
 """
 
 from __future__ import annotations
@@ -228,7 +235,8 @@ def obstacle(n, t_end, frames, gradient_correction="first_order"):
     fig, ax = plt.subplots(1, 3, figsize=(15, 4))
     for k, (tr, ur) in refs.items():
         ax[0].plot(tr, 1e3 * ur, "--", lw=1, label=k)
-    ax[0].plot(t, 1e3 * tip[:, 0], "k", lw=2, label=f"sphjax, n = {n}")
+    order = "" if gradient_correction == "first_order" else f", {gradient_correction}"
+    ax[0].plot(t, 1e3 * tip[:, 0], "k", lw=2, label=f"sphjax, n = {n}{order}")
     ax[0].set(xlabel="t (s)", ylabel="tip ux (mm)", title="plate top, horizontal")
     ax[0].legend(fontsize=7)
     E0 = energy["total"][0]
@@ -290,14 +298,63 @@ def gate_run(case, t_end, frames, exp):
     return row, t, tip
 
 
+def gate_dry(n, gradient_correction, pressure=100.0, t_end=0.3):
+    """The gate of ``elastic_gate_dam_break(n)`` alone (no fluid, no walls) under a uniform
+    sideways load ``pressure`` (its weight turned horizontal, ``g = pressure / (rho_s t)``),
+    undamped from rest for ``t_end``: the free end's mean and ``(max + min) / 2`` over the
+    run against Euler-Bernoulli's plane-strain cantilever ``q L^4 / (8 D)``."""
+    case = elastic_gate_dam_break(n=n, substeps=1, gradient_correction=gradient_correction)
+    kind = np.asarray(case.state.kind)
+    keep = kind >= Kind.SOLID
+
+    def take(a):
+        return a[keep] if getattr(a, "ndim", 0) >= 1 and a.shape[0] == len(kind) else a
+
+    state = jax.tree_util.tree_map(take, case.state)
+    p, t = case.params, case.info["gate_thickness"]
+    params = sphjax.make_params(
+        2,
+        gravity=(pressure / (float(p.solid_density) * t), 0.0),
+        young_modulus=p.young_modulus,
+        poisson_ratio=p.poisson_ratio,
+        solid_density=p.solid_density,
+    )
+    model = case.model.replace(systems=(case.model.system(sphjax.SolidSystem),))
+    shift = int((~keep).sum())
+    tips = tuple(int(i) - shift for i in case.info["tip_indices"])
+    info = dict(case.info, tip_indices=tips, tip_index=tips[0])
+    dt = sphjax.stable_time_step(state, model, params, solid_cfl=0.5)
+    dry = sphjax.Case("dry_gate", state, model, params, dt, t_end, info)
+    E, nu, L = float(p.young_modulus), float(p.poisson_ratio), case.info["gate_length"]
+    reference = pressure * L**4 / (8.0 * E * t**3 / (12.0 * (1.0 - nu**2)))
+    steps = int(round(t_end / dt))
+    traj = sphjax.simulate(dry, n_steps=steps, save_every=max(1, steps // 600))
+    ux = np.asarray(observables.tip_displacement(traj, dry))[:, 0]
+    return dict(
+        case="elastic_gate_dam_break, gate alone",
+        n=n,
+        gradient_correction=gradient_correction,
+        pressure=pressure,
+        t_end=t_end,
+        particles=dry.n_particles,
+        steps=steps,
+        reference=reference,
+        mean=float(ux.mean() / reference),
+        mid_range=float(0.5 * (ux.max() + ux.min()) / reference),
+    )
+
+
 STYLES = ("b", "r--")
 
 
-def gate(n, t_end, frames, substeps, plane_stress=False, gradient_correction="first_order"):
+def gate(
+    n, t_end, frames, substeps, plane_stress=False, gradient_correction="first_order", **extra
+):
     """The elastic gate's free end against Antoci et al.'s experiment; with
     ``plane_stress`` also the gate of the same E and nu in plane stress
     (:func:`sphjax.physics.solid.material.plane_stress_equivalent`); the gate's
-    ``SolidSystem.gradient_correction`` is ``gradient_correction``."""
+    ``SolidSystem.gradient_correction`` is ``gradient_correction``; ``extra``: further
+    arguments of :func:`elastic_gate_dam_break` (``outflow_length``)."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -306,7 +363,9 @@ def gate(n, t_end, frames, substeps, plane_stress=False, gradient_correction="fi
     from sphjax.physics.solid.material import plane_stress_equivalent
 
     exp = read_series(DATA / "antoci_2007_gate_tip_displacement.csv")
-    case = elastic_gate_dam_break(n=n, substeps=substeps, gradient_correction=gradient_correction)
+    case = elastic_gate_dam_break(
+        n=n, substeps=substeps, gradient_correction=gradient_correction, **extra
+    )
     runs = {"plane strain": gate_run(case, t_end, frames, exp)}
     if plane_stress:
         E, nu = (float(case.params.young_modulus), float(case.params.poisson_ratio))
@@ -317,6 +376,7 @@ def gate(n, t_end, frames, substeps, plane_stress=False, gradient_correction="fi
             young_modulus=E,
             poisson_ratio=nu,
             gradient_correction=gradient_correction,
+            **extra,
         )
         runs["plane stress"] = gate_run(sheet, t_end, frames, exp)
     fig, ax = plt.subplots(1, 2, figsize=(10, 4))
@@ -324,11 +384,14 @@ def gate(n, t_end, frames, substeps, plane_stress=False, gradient_correction="fi
         te, ue = exp[key]
         ax[j].plot(te, 1e3 * ue, "ko", label="Antoci et al. 2007 (experiment)")
         for (label, (_, t, tip)), style in zip(runs.items(), STYLES[: len(runs)], strict=True):
-            ax[j].plot(t, 1e3 * tip[:, j], style, label=f"sphjax, n = {n}, {label}")
+            order = "" if gradient_correction == "first_order" else f", {gradient_correction}"
+            ax[j].plot(t, 1e3 * tip[:, j], style, label=f"sphjax, n = {n}, {label}{order}")
         ax[j].set(xlabel="t (s)", ylabel=f"{key} (mm)", title=f"gate free end, {key}")
         ax[j].legend(fontsize=8)
     fig.tight_layout()
     suffix = "" if gradient_correction == "first_order" else f"_n{n}_{gradient_correction}"
+    if suffix and substeps != "auto":
+        suffix += f"_k{substeps}"
     fig.savefig(FIGURES / f"fsi_gate{suffix}.png", dpi=110)
     row = runs["plane strain"][0]
     if plane_stress:
@@ -379,8 +442,22 @@ def main(argv=None):
         action="store_true",
         help="gate: also run the gate of the same E, nu in plane stress",
     )
+    p.add_argument(
+        "--outflow-length",
+        type=float,
+        default=None,
+        help="gate: the floor's length past the gate (the case's default 0.4 m)",
+    )
     p.add_argument("--out", default=None)
     args = p.parse_args(argv)
+    if args.case == "gate" and args.dry_only:
+        for n in args.n:
+            row = gate_dry(n, args.gradient_correction)
+            print(json.dumps(row), flush=True)
+            if args.out:
+                with open(args.out, "a") as f:
+                    f.write(json.dumps(row) + "\n")
+        return
     if args.case in ("obstacle", "gate"):
         n = args.n[0]
         if args.case == "obstacle":
@@ -388,9 +465,17 @@ def main(argv=None):
         else:
             k = args.substeps[0]
             k = k if k == "auto" else int(k)
+            extra = {} if args.outflow_length is None else dict(outflow_length=args.outflow_length)
             row = gate(
-                n, args.t_end or 0.4, args.frames, k, args.plane_stress, args.gradient_correction
+                n,
+                args.t_end or 0.4,
+                args.frames,
+                k,
+                args.plane_stress,
+                args.gradient_correction,
+                **extra,
             )
+            row.update(extra)
         out = pathlib.Path(args.out or FIGURES / f"fsi_{args.case}.json")
         out.write_text(json.dumps(row, indent=1) + "\n")
         print(json.dumps({k: v for k, v in row.items() if k != "series"}, indent=1))
