@@ -31,8 +31,9 @@ gradient (its step and ``"auto"`` substeps computed for it) and is recorded in t
 
     python docs/scripts/validate_fsi.py --case gate --dry-only --n 2 3 4 6 --out gate_dry.jsonl
 
-``--case gate --dry-only``: the gate alone under a uniform sideways load of 100 Pa against
-Euler-Bernoulli's cantilever (:func:`gate_dry`).
+``--case gate --dry-only`` (``obstacle``): the gate (the obstacle's plate) alone under a
+uniform sideways load of 100 Pa against Euler-Bernoulli's cantilever
+(:func:`cantilever_alone`; default ``--t-end`` 0.3 s for the gate, 1 s for the plate).
 """
 
 from __future__ import annotations
@@ -298,12 +299,13 @@ def gate_run(case, t_end, frames, exp):
     return row, t, tip
 
 
-def gate_dry(n, gradient_correction, pressure=100.0, t_end=0.3):
-    """The gate of ``elastic_gate_dam_break(n)`` alone (no fluid, no walls) under a uniform
-    sideways load ``pressure`` (its weight turned horizontal, ``g = pressure / (rho_s t)``),
-    undamped from rest for ``t_end``: the free end's mean and ``(max + min) / 2`` over the
-    run against Euler-Bernoulli's plane-strain cantilever ``q L^4 / (8 D)``."""
-    case = elastic_gate_dam_break(n=n, substeps=1, gradient_correction=gradient_correction)
+def cantilever_alone(case, length, thickness, pressure=100.0, t_end=0.3, cfl=0.5):
+    """The solid of ``case`` (the gate or the obstacle's plate, clamped at one end) alone,
+    no fluid, no walls, under a uniform sideways load ``pressure`` (its weight turned
+    horizontal, ``g = pressure / (rho_s t)``), undamped from rest for ``t_end``: the free
+    end's (``info["tip_indices"]``) mean and ``(max + min) / 2`` over the run against
+    Euler-Bernoulli's plane-strain cantilever ``q L^4 / (8 D)``; ``cfl``: the solid
+    Courant number of its step."""
     kind = np.asarray(case.state.kind)
     keep = kind >= Kind.SOLID
 
@@ -311,7 +313,7 @@ def gate_dry(n, gradient_correction, pressure=100.0, t_end=0.3):
         return a[keep] if getattr(a, "ndim", 0) >= 1 and a.shape[0] == len(kind) else a
 
     state = jax.tree_util.tree_map(take, case.state)
-    p, t = case.params, case.info["gate_thickness"]
+    p, t = case.params, thickness
     params = sphjax.make_params(
         2,
         gravity=(pressure / (float(p.solid_density) * t), 0.0),
@@ -323,17 +325,18 @@ def gate_dry(n, gradient_correction, pressure=100.0, t_end=0.3):
     shift = int((~keep).sum())
     tips = tuple(int(i) - shift for i in case.info["tip_indices"])
     info = dict(case.info, tip_indices=tips, tip_index=tips[0])
-    dt = sphjax.stable_time_step(state, model, params, solid_cfl=0.5)
-    dry = sphjax.Case("dry_gate", state, model, params, dt, t_end, info)
-    E, nu, L = float(p.young_modulus), float(p.poisson_ratio), case.info["gate_length"]
+    dt = sphjax.stable_time_step(state, model, params, solid_cfl=cfl)
+    dry = sphjax.Case("cantilever", state, model, params, dt, t_end, info)
+    E, nu, L = float(p.young_modulus), float(p.poisson_ratio), length
     reference = pressure * L**4 / (8.0 * E * t**3 / (12.0 * (1.0 - nu**2)))
     steps = int(round(t_end / dt))
     traj = sphjax.simulate(dry, n_steps=steps, save_every=max(1, steps // 600))
     ux = np.asarray(observables.tip_displacement(traj, dry))[:, 0]
+    solid = case.model.system(sphjax.SolidSystem)
     return dict(
-        case="elastic_gate_dam_break, gate alone",
-        n=n,
-        gradient_correction=gradient_correction,
+        case=f"{case.name}, solid alone",
+        n=case.info["n"],
+        gradient_correction=solid.gradient_correction,
         pressure=pressure,
         t_end=t_end,
         particles=dry.n_particles,
@@ -450,9 +453,20 @@ def main(argv=None):
     )
     p.add_argument("--out", default=None)
     args = p.parse_args(argv)
-    if args.case == "gate" and args.dry_only:
+    if args.case in ("gate", "obstacle") and args.dry_only:
         for n in args.n:
-            row = gate_dry(n, args.gradient_correction)
+            kw = dict(n=n, substeps=1, gradient_correction=args.gradient_correction)
+            if args.case == "gate":
+                case = elastic_gate_dam_break(**kw)
+                size = (case.info["gate_length"], case.info["gate_thickness"])
+            else:
+                case = dam_break_elastic_obstacle(**kw)
+                size = (case.info["plate_length"], case.info["plate_thickness"])
+            t_end = args.t_end or (0.3 if args.case == "gate" else 1.0)
+            # the plate's nu = 0: its P-wave modulus E is twice the bulk modulus the
+            # solid's stable step takes (E / 2 in 2D), so half that Courant number
+            cfl = 0.5 if args.case == "gate" else 0.25
+            row = cantilever_alone(case, *size, t_end=t_end, cfl=cfl)
             print(json.dumps(row), flush=True)
             if args.out:
                 with open(args.out, "a") as f:
