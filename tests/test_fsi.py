@@ -442,6 +442,57 @@ def test_split_integration_options():
         sphjax.diffeqsolve_case(split, t1=split.dt)
 
 
+def test_coupled_cases_take_the_second_order_step():
+    """``gradient_correction="second_order"`` in a coupled case's constructor: the step and
+    ``"auto"``'s substeps are computed for it.  The gate (n = 3) takes a whole number of
+    second-order solid steps in the fluid's step (7 instead of 3), each within the second
+    order's stable step, half the first order's; the first-order case with only its solid
+    swapped (the step kept) is refused by the step check; the obstacle's soft plate at
+    n = 3 stays within the fluid's step (one solid step a step, the same step).  A
+    scaled-down gate, 3 through, runs 20 steps with finite positions, its free end pushed
+    downstream by the water."""
+    from sphjax.cases.fsi import dam_break_elastic_obstacle, elastic_gate_dam_break
+    from sphjax.integration.timestep import stable_time_step
+
+    first = elastic_gate_dam_break(n=3)
+    second = elastic_gate_dam_break(n=3, gradient_correction="second_order")
+    solid = second.model.system(sphjax.SolidSystem)
+    assert solid.gradient_correction == "second_order"
+    assert (first.info["substeps"], second.info["substeps"]) == (3, 7)
+
+    def solid_step(case):
+        alone = case.model.replace(systems=case.model.systems[-1:])
+        return stable_time_step(case.state, alone, case.params, solid_cfl=0.5)
+
+    inner = solid_step(second) / 7  # the solid's limit is substeps times its own step
+    assert inner == pytest.approx(0.5 * solid_step(first) / 3, rel=1e-12)
+    assert second.dt <= 7 * inner * (1 + 1e-12)
+    fluid = second.model.replace(systems=second.model.systems[:-1])
+    assert second.dt <= stable_time_step(second.state, fluid, second.params) * (1 + 1e-12)
+    check_time_step(second.dt, second.state, second.model, second.params)
+    swapped = first.model.replace(
+        systems=first.model.systems[:-1]
+        + (first.model.system(sphjax.SolidSystem).replace(gradient_correction="second_order"),)
+    )
+    with pytest.raises(ValueError, match="exceeds the stability limit"):
+        check_time_step(first.dt, first.state, swapped, first.params)
+    obstacle = [dam_break_elastic_obstacle(n=3, gradient_correction=g) for g in GRADIENTS]
+    assert [o.info["substeps"] for o in obstacle] == [1, 1]
+    assert obstacle[1].dt == obstacle[0].dt
+
+    small = elastic_gate_dam_break(
+        n=3, column_width=0.02, column_height=0.028, gate_length=0.016, outflow_length=0.02,
+        gradient_correction="second_order",
+    )  # fmt: skip
+    trajectory = sphjax.simulate(small, n_steps=20, save_every=20)
+    assert np.isfinite(np.asarray(trajectory.states.position)).all()
+    tip = np.asarray(sphjax.cases.tip_displacement(trajectory, small))[-1]
+    assert tip[0] > 0
+
+
+GRADIENTS = ("first_order", "second_order")
+
+
 #: CI-size dam break against the elastic plate: the column and the plate scaled down
 #: (6 x 12 fluid particles, a plate 2 x 5), the impact at about 0.075 s
 OBSTACLE_CI = dict(column_width=0.036, plate_length=0.03)

@@ -77,8 +77,10 @@ def inward(case, columns):
 def run(n, variant, periods, h_factor=None):
     zero = variant == "zero_clamp_stress"
     solid_system.update_solid = _zero_clamped_stress if zero else _update_solid
-    case = hydrostatic_fsi_plate(n=n, depth=0.5, h_factor=h_factor)
-    case = vf.dry_case(vf.with_gradient_correction(case, "second_order"))
+    case = hydrostatic_fsi_plate(
+        n=n, depth=0.5, h_factor=h_factor, gradient_correction="second_order"
+    )
+    case = vf.dry_case(case)
     if variant.startswith("clamp"):
         case = trimmed(case, int(variant[5:]))
     if variant.startswith("inward"):

@@ -25,7 +25,15 @@ the plate top's displacement against the published curves
 numbers ``docs/figures/fsi_obstacle.json``.  ``--case gate``: the elastic gate's free end
 against Antoci et al.'s experiment (``docs/data/antoci_2007_gate_tip_displacement.csv``);
 ``docs/figures/fsi_gate.png`` and ``.json``; with ``--plane-stress`` also the gate of the
-same E and nu in plane stress.
+same E and nu in plane stress; ``--outflow-length`` the floor's length past the gate.
+``--gradient-correction second_order`` builds every case with the second-order solid
+gradient (its step and ``"auto"`` substeps computed for it) and is recorded in the output.
+
+    python docs/scripts/validate_fsi.py --case gate --dry-only --n 2 3 4 6 --out gate_dry.jsonl
+
+``--case gate --dry-only`` (``obstacle``): the gate (the obstacle's plate) alone under a
+uniform sideways load of 100 Pa against Euler-Bernoulli's cantilever
+(:func:`cantilever_alone`; default ``--t-end`` 0.3 s for the gate, 1 s for the plate).
 """
 
 from __future__ import annotations
@@ -87,15 +95,6 @@ def dry_case(case):
     )
 
 
-def with_gradient_correction(case, choice):
-    """``case`` with its solid's ``gradient_correction`` set to ``choice``."""
-    systems = tuple(
-        s.replace(gradient_correction=choice) if isinstance(s, sphjax.SolidSystem) else s
-        for s in case.model.systems
-    )
-    return case.replace(model=case.model.replace(systems=systems))
-
-
 def measure(case, t_end):
     n_steps = int(round(t_end / case.dt))
     start = time.perf_counter()
@@ -152,6 +151,16 @@ def peak(t, u):
     return float(u[i]), float(t[i])
 
 
+def coupling_info(case):
+    """The solid's gradient correction, its steps per step and the step of ``case``."""
+    solid = case.model.system(sphjax.SolidSystem)
+    return dict(
+        gradient_correction=solid.gradient_correction,
+        substeps=solid.substeps,
+        float64=bool(jax.config.jax_enable_x64),
+    )
+
+
 def run_coupled(case, t_end, frames):
     n_steps = int(round(t_end / case.dt))
     save_every = max(1, n_steps // frames)
@@ -168,15 +177,17 @@ def run_coupled(case, t_end, frames):
     return traj, cost
 
 
-def obstacle(n, t_end, frames):
-    """The dam break against the elastic plate: tip curve, energy and momentum budgets."""
+def obstacle(n, t_end, frames, gradient_correction="first_order"):
+    """The dam break against the elastic plate: tip curve, energy and momentum budgets;
+    the plate's ``SolidSystem.gradient_correction`` is ``gradient_correction`` (the
+    case's step computed for it)."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
     jax.config.update("jax_enable_x64", True)
-    case = dam_break_elastic_obstacle(n=n)
+    case = dam_break_elastic_obstacle(n=n, gradient_correction=gradient_correction)
     traj, cost = run_coupled(case, t_end, frames)
     t = np.asarray(traj.states.time)
     tip = np.asarray(observables.tip_displacement(traj, case))
@@ -187,6 +198,7 @@ def obstacle(n, t_end, frames):
     refs = read_series(DATA / "elastic_plate_dam_break_tip_displacement.csv")
     peak_u, peak_t = peak(t, tip[:, 0])
     row = dict(case="dam_break_elastic_obstacle", n=n, dx=case.info["dx"], t_end=t_end, **cost)
+    row.update(coupling_info(case))
     row.update(
         finite=finite,
         tip_peak_ux=peak_u,
@@ -224,7 +236,8 @@ def obstacle(n, t_end, frames):
     fig, ax = plt.subplots(1, 3, figsize=(15, 4))
     for k, (tr, ur) in refs.items():
         ax[0].plot(tr, 1e3 * ur, "--", lw=1, label=k)
-    ax[0].plot(t, 1e3 * tip[:, 0], "k", lw=2, label=f"sphjax, n = {n}")
+    order = "" if gradient_correction == "first_order" else f", {gradient_correction}"
+    ax[0].plot(t, 1e3 * tip[:, 0], "k", lw=2, label=f"sphjax, n = {n}{order}")
     ax[0].set(xlabel="t (s)", ylabel="tip ux (mm)", title="plate top, horizontal")
     ax[0].legend(fontsize=7)
     E0 = energy["total"][0]
@@ -246,7 +259,10 @@ def obstacle(n, t_end, frames):
     ax[2].set(xlabel="t (s)", ylabel="kg m/s per m", title="horizontal momentum")
     ax[2].legend(fontsize=7)
     fig.tight_layout()
-    fig.savefig(FIGURES / ("fsi_obstacle.png" if n == 2 else f"fsi_obstacle_n{n}.png"), dpi=110)
+    name = "fsi_obstacle" if n == 2 else f"fsi_obstacle_n{n}"
+    if gradient_correction != "first_order":
+        name += f"_{gradient_correction}"
+    fig.savefig(FIGURES / f"{name}.png", dpi=110)
     return row
 
 
@@ -257,7 +273,7 @@ def gate_run(case, t_end, frames, exp):
     tip = np.asarray(observables.tip_displacement(traj, case))
     row = dict(case="elastic_gate_dam_break", n=case.info["n"], dx=case.info["dx"], **cost)
     row["t_end"] = t_end
-    row["substeps"] = case.info["substeps"]
+    row.update(coupling_info(case))
     row["young_modulus"] = float(case.params.young_modulus)
     row["poisson_ratio"] = float(case.params.poisson_ratio)
     row["finite"] = bool(np.all(np.isfinite(tip)))
@@ -283,13 +299,65 @@ def gate_run(case, t_end, frames, exp):
     return row, t, tip
 
 
+def cantilever_alone(case, length, thickness, pressure=100.0, t_end=0.3, cfl=0.5):
+    """The solid of ``case`` (the gate or the obstacle's plate, clamped at one end) alone,
+    no fluid, no walls, under a uniform sideways load ``pressure`` (its weight turned
+    horizontal, ``g = pressure / (rho_s t)``), undamped from rest for ``t_end``: the free
+    end's (``info["tip_indices"]``) mean and ``(max + min) / 2`` over the run against
+    Euler-Bernoulli's plane-strain cantilever ``q L^4 / (8 D)``; ``cfl``: the solid
+    Courant number of its step."""
+    kind = np.asarray(case.state.kind)
+    keep = kind >= Kind.SOLID
+
+    def take(a):
+        return a[keep] if getattr(a, "ndim", 0) >= 1 and a.shape[0] == len(kind) else a
+
+    state = jax.tree_util.tree_map(take, case.state)
+    p, t = case.params, thickness
+    params = sphjax.make_params(
+        2,
+        gravity=(pressure / (float(p.solid_density) * t), 0.0),
+        young_modulus=p.young_modulus,
+        poisson_ratio=p.poisson_ratio,
+        solid_density=p.solid_density,
+    )
+    model = case.model.replace(systems=(case.model.system(sphjax.SolidSystem),))
+    shift = int((~keep).sum())
+    tips = tuple(int(i) - shift for i in case.info["tip_indices"])
+    info = dict(case.info, tip_indices=tips, tip_index=tips[0])
+    dt = sphjax.stable_time_step(state, model, params, solid_cfl=cfl)
+    dry = sphjax.Case("cantilever", state, model, params, dt, t_end, info)
+    E, nu, L = float(p.young_modulus), float(p.poisson_ratio), length
+    reference = pressure * L**4 / (8.0 * E * t**3 / (12.0 * (1.0 - nu**2)))
+    steps = int(round(t_end / dt))
+    traj = sphjax.simulate(dry, n_steps=steps, save_every=max(1, steps // 600))
+    ux = np.asarray(observables.tip_displacement(traj, dry))[:, 0]
+    solid = case.model.system(sphjax.SolidSystem)
+    return dict(
+        case=f"{case.name}, solid alone",
+        n=case.info["n"],
+        gradient_correction=solid.gradient_correction,
+        pressure=pressure,
+        t_end=t_end,
+        particles=dry.n_particles,
+        steps=steps,
+        reference=reference,
+        mean=float(ux.mean() / reference),
+        mid_range=float(0.5 * (ux.max() + ux.min()) / reference),
+    )
+
+
 STYLES = ("b", "r--")
 
 
-def gate(n, t_end, frames, substeps, plane_stress=False):
+def gate(
+    n, t_end, frames, substeps, plane_stress=False, gradient_correction="first_order", **extra
+):
     """The elastic gate's free end against Antoci et al.'s experiment; with
     ``plane_stress`` also the gate of the same E and nu in plane stress
-    (:func:`sphjax.physics.solid.material.plane_stress_equivalent`)."""
+    (:func:`sphjax.physics.solid.material.plane_stress_equivalent`); the gate's
+    ``SolidSystem.gradient_correction`` is ``gradient_correction``; ``extra``: further
+    arguments of :func:`elastic_gate_dam_break` (``outflow_length``)."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -298,23 +366,36 @@ def gate(n, t_end, frames, substeps, plane_stress=False):
     from sphjax.physics.solid.material import plane_stress_equivalent
 
     exp = read_series(DATA / "antoci_2007_gate_tip_displacement.csv")
-    case = elastic_gate_dam_break(n=n, substeps=substeps)
+    case = elastic_gate_dam_break(
+        n=n, substeps=substeps, gradient_correction=gradient_correction, **extra
+    )
     runs = {"plane strain": gate_run(case, t_end, frames, exp)}
     if plane_stress:
         E, nu = (float(case.params.young_modulus), float(case.params.poisson_ratio))
         E, nu = plane_stress_equivalent(E, nu)
-        sheet = elastic_gate_dam_break(n=n, substeps=substeps, young_modulus=E, poisson_ratio=nu)
+        sheet = elastic_gate_dam_break(
+            n=n,
+            substeps=substeps,
+            young_modulus=E,
+            poisson_ratio=nu,
+            gradient_correction=gradient_correction,
+            **extra,
+        )
         runs["plane stress"] = gate_run(sheet, t_end, frames, exp)
     fig, ax = plt.subplots(1, 2, figsize=(10, 4))
     for j, key in enumerate(("ux", "uy")):
         te, ue = exp[key]
         ax[j].plot(te, 1e3 * ue, "ko", label="Antoci et al. 2007 (experiment)")
         for (label, (_, t, tip)), style in zip(runs.items(), STYLES[: len(runs)], strict=True):
-            ax[j].plot(t, 1e3 * tip[:, j], style, label=f"sphjax, n = {n}, {label}")
+            order = "" if gradient_correction == "first_order" else f", {gradient_correction}"
+            ax[j].plot(t, 1e3 * tip[:, j], style, label=f"sphjax, n = {n}, {label}{order}")
         ax[j].set(xlabel="t (s)", ylabel=f"{key} (mm)", title=f"gate free end, {key}")
         ax[j].legend(fontsize=8)
     fig.tight_layout()
-    fig.savefig(FIGURES / "fsi_gate.png", dpi=110)
+    suffix = "" if gradient_correction == "first_order" else f"_n{n}_{gradient_correction}"
+    if suffix and substeps != "auto":
+        suffix += f"_k{substeps}"
+    fig.savefig(FIGURES / f"fsi_gate{suffix}.png", dpi=110)
     row = runs["plane strain"][0]
     if plane_stress:
         row["plane_stress"] = runs["plane stress"][0]
@@ -345,7 +426,8 @@ def main(argv=None):
         "--gradient-correction",
         choices=("first_order", "second_order"),
         default="first_order",
-        help="the solid's reference kernel gradient (SolidSystem.gradient_correction)",
+        help="the solid's reference kernel gradient (SolidSystem.gradient_correction), "
+        "every case; its time step and 'auto' substeps computed for it",
     )
     p.add_argument(
         "--face-weight",
@@ -363,16 +445,51 @@ def main(argv=None):
         action="store_true",
         help="gate: also run the gate of the same E, nu in plane stress",
     )
+    p.add_argument(
+        "--outflow-length",
+        type=float,
+        default=None,
+        help="gate: the floor's length past the gate (the case's default 0.4 m)",
+    )
     p.add_argument("--out", default=None)
     args = p.parse_args(argv)
+    if args.case in ("gate", "obstacle") and args.dry_only:
+        for n in args.n:
+            kw = dict(n=n, substeps=1, gradient_correction=args.gradient_correction)
+            if args.case == "gate":
+                case = elastic_gate_dam_break(**kw)
+                size = (case.info["gate_length"], case.info["gate_thickness"])
+            else:
+                case = dam_break_elastic_obstacle(**kw)
+                size = (case.info["plate_length"], case.info["plate_thickness"])
+            t_end = args.t_end or (0.3 if args.case == "gate" else 1.0)
+            # the plate's nu = 0: its P-wave modulus E is twice the bulk modulus the
+            # solid's stable step takes (E / 2 in 2D), so half that Courant number
+            cfl = 0.5 if args.case == "gate" else 0.25
+            row = cantilever_alone(case, *size, t_end=t_end, cfl=cfl)
+            print(json.dumps(row), flush=True)
+            if args.out:
+                with open(args.out, "a") as f:
+                    f.write(json.dumps(row) + "\n")
+        return
     if args.case in ("obstacle", "gate"):
         n = args.n[0]
         if args.case == "obstacle":
-            row = obstacle(n, args.t_end or 1.0, args.frames)
+            row = obstacle(n, args.t_end or 1.0, args.frames, args.gradient_correction)
         else:
             k = args.substeps[0]
             k = k if k == "auto" else int(k)
-            row = gate(n, args.t_end or 0.4, args.frames, k, args.plane_stress)
+            extra = {} if args.outflow_length is None else dict(outflow_length=args.outflow_length)
+            row = gate(
+                n,
+                args.t_end or 0.4,
+                args.frames,
+                k,
+                args.plane_stress,
+                args.gradient_correction,
+                **extra,
+            )
+            row.update(extra)
         out = pathlib.Path(args.out or FIGURES / f"fsi_{args.case}.json")
         out.write_text(json.dumps(row, indent=1) + "\n")
         print(json.dumps({k: v for k, v in row.items() if k != "series"}, indent=1))
@@ -392,11 +509,11 @@ def main(argv=None):
     if args.placement == "surface":
         plate.update(face_weight=args.face_weight, clamp_end_columns=not args.free_end_columns)
     for n in args.n:
+        plate["gradient_correction"] = args.gradient_correction
         case = hydrostatic_fsi_plate(n=n, **plate)
-        case = with_gradient_correction(case, args.gradient_correction)
         t_end = args.periods * case.info["dry_period"]
         row = dict(n=n, depth=case.info["depth"], dx=case.info["dx"], t_end=t_end)
-        row.update({k: v for k, v in plate.items() if k != "depth"})
+        row.update({k: v for k, v in plate.items() if k not in ("depth", "gradient_correction")})
         row.update(float64=args.float64, end_columns_clamped=not args.free_end_columns)
         row["face_weight"] = args.face_weight
         row["gradient_correction"] = args.gradient_correction
@@ -410,7 +527,6 @@ def main(argv=None):
         for substeps in [] if args.dry_only else args.substeps:
             k = substeps if substeps == "auto" else int(substeps)
             split = hydrostatic_fsi_plate(n=n, **plate, substeps=k)
-            split = with_gradient_correction(split, args.gradient_correction)
             row["fsi"] = dict(measure(split, t_end), substeps=split.info["substeps"])
             row["fsi"]["dt"] = split.dt
             print(json.dumps(row, default=str)[:400], flush=True)
