@@ -393,3 +393,12 @@ def test_a_buoyant_gravity_that_is_no_2d_vector_is_refused(bad):
     with pytest.raises(ValueError, match=r"^RigidSystem.buoyant_gravity must be None or a 2D"):
         sphjax.RigidSystem(buoyant_gravity=bad)
     assert sphjax.RigidSystem(buoyant_gravity=[0, -1]).buoyant_gravity == (0.0, -1.0)
+
+
+def test_gravity_beside_a_buoyant_gravity_is_refused_before_the_first_step():
+    """With ``buoyant_gravity`` the body's buoyancy is in its weight; a fluid with gravity
+    too would add it again through the hydrostatic pressure: one line, before any step."""
+    case = sphjax.cases.settling_disk(n=4, t_end=0.01)
+    case = case.replace(params=case.params.replace(gravity=jnp.array([0.0, -980.0])))
+    with pytest.raises(ValueError, match=r"buoyancy twice; set gravity to zero"):
+        sphjax.simulate(case, n_steps=2)

@@ -48,6 +48,7 @@ import dataclasses
 import math
 
 import jax.numpy as jnp
+import numpy as np
 
 from sphjax.core.params import CONTACT_FIELDS, SOLID_DEFAULTS, refusal
 from sphjax.core.state import Kind
@@ -77,6 +78,13 @@ def rigid_motion(x, v, m):
     V = jnp.sum(m[:, None] * v, axis=0) / M
     omega = jnp.sum(m * _cross(r, v - V)) / I
     return X, V, omega, r, I
+
+
+def buoyant_weight(buoyant_gravity, fluid_density, body_density):
+    """``(1 - rho0_f / rho_b) g_b``: the body's weight less its buoyancy per unit mass in a
+    fluid whose hydrostatic pressure is left out (the last term of ``F``, module
+    docstring)."""
+    return (1.0 - fluid_density / body_density) * buoyant_gravity
 
 
 def rigid_acceleration(x, v, m, force, gravity):
@@ -199,9 +207,26 @@ class RigidSystem:
         force = m[:, None] * acceleration
         gravity = params.gravity
         if self.buoyant_gravity is not None:
-            reduced = 1.0 - params.fluid.reference_density / params.solid.solid_density
-            gravity = gravity + reduced * jnp.asarray(self.buoyant_gravity, gravity.dtype)
+            gravity = gravity + buoyant_weight(
+                jnp.asarray(self.buoyant_gravity, gravity.dtype),
+                params.fluid.reference_density,
+                params.solid.solid_density,
+            )
         return rigid_acceleration(view["x"], view["v"], m, force, gravity)
+
+    def check_params(self, params) -> None:
+        """With ``buoyant_gravity`` the fluid carries no hydrostatic pressure: a non-zero
+        ``Params.gravity`` would give the body its buoyancy twice (from the pressure and
+        in ``buoyant_weight``), so it is refused."""
+        if self.buoyant_gravity is None:
+            return
+        g = np.asarray(params.gravity, dtype=float)
+        if np.any(g != 0.0):
+            raise ValueError(
+                f"gravity = {tuple(g.tolist())} with RigidSystem(buoyant_gravity="
+                f"{self.buoyant_gravity}): the body would feel its buoyancy twice; set "
+                "gravity to zero (buoyant_gravity stands for it) or drop buoyant_gravity"
+            )
 
     def held_kinds(self) -> tuple:
         return ()
