@@ -63,7 +63,44 @@ def test_a_learning_rate_schedule_reaches_the_optimiser(problem):
     np.testing.assert_array_equal(losses[3:], losses[3])  # the later ones did not
 
 
+def test_the_loss_relative_to_the_coarse_solver_by_hand_and_training_lowers_it(problem):
+    """``loss="relative_to_coarse"`` is ``mean_k e_k^2 / (e^c_k)^2`` over the window: 1 for
+    the untrained (zero) correction, which is the coarse solver; after twelve updates the
+    recorded loss (the schedule then stops the updates, so the last losses are those of
+    the returned network) equals the value computed by hand from :func:`errors`, and is
+    lower than the coarse solver's."""
+    import optax
+
+    net = sil.Corrector(problem, jax.random.PRNGKey(0))
+    coarse = sil.errors(problem, None)[0, 1:]
+    np.testing.assert_allclose(sil.coarse_weights(problem)[0, 1:], 1 / coarse**2)
+    schedule = optax.piecewise_constant_schedule(1e-2, {12: 0.0})
+    result = sil.train(
+        problem,
+        net,
+        unroll=4,
+        iterations=14,
+        lr=schedule,
+        loss="relative_to_coarse",
+        log=lambda s: None,
+    )
+    losses = np.asarray(result.losses)
+    assert losses[0] == pytest.approx(1.0, rel=1e-9)
+    trained = sil.errors(problem, result.net)[0, 1:]
+    by_hand = np.mean(trained**2 / coarse**2)
+    assert losses[13] == pytest.approx(by_hand, rel=1e-9)
+    assert by_hand < 0.9
+
+
 def test_bad_arguments_are_named(problem):
+    with pytest.raises(ValueError, match="loss must be one of relative, relative_to_coarse"):
+        sil.train(
+            problem,
+            sil.Corrector(problem, jax.random.PRNGKey(0)),
+            unroll=4,
+            iterations=1,
+            loss="mse",
+        )
     with pytest.raises(ValueError, match="unroll must lie in 1..4"):
         sil.train(problem, sil.Corrector(problem, jax.random.PRNGKey(0)), unroll=5, iterations=1)
     with pytest.raises(ValueError, match="lr must be a positive number or an optax schedule"):
