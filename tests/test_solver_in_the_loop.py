@@ -93,6 +93,34 @@ def test_the_loss_relative_to_the_coarse_solver_by_hand_and_training_lowers_it(p
     assert by_hand < 0.9
 
 
+def test_the_density_input_reaches_the_network(problem):
+    """``Corrector(density=True)``: one more node input, ``(rho / rho0 - 1) (c0 / U)^2``;
+    with a non-zero decoder, a change of the density alone changes the correction, which
+    it does not without the input (eager calls on the 64 coarse particles)."""
+    import equinox as eqx
+
+    state = problem.coarse.state
+    graph = sil._graph(problem)
+    nbrs = sil.allocate(problem)
+    denser = state.replace(density=state.density * 1.002)
+    for density in (True, False):
+        net = sil.Corrector(problem, jax.random.PRNGKey(0), density=density)
+        last = net.gns.decoder.weights[-1]
+        net = eqx.tree_at(lambda n: n.gns.decoder.weights[-1], net, last + 0.1)
+        # node inputs: the velocity (2), the density (1 or none), the type embedding (8)
+        assert net.gns.node_encoder.weights[0].shape[0] == 2 + density + 8
+        a, _ = net(state, graph, nbrs, problem.speed)
+        b, _ = net(denser, graph, nbrs, problem.speed)
+        change = float(np.abs(np.asarray(a) - np.asarray(b)).max())
+        if density:
+            params = problem.coarse.params
+            c0, rho0 = float(params.sound_speed), float(params.reference_density)
+            assert net.density == pytest.approx((rho0, (c0 / problem.speed) ** 2))
+            assert change > 1e-6 * float(np.abs(np.asarray(a)).max())
+        else:
+            assert net.density is None and change == 0.0
+
+
 def test_bad_arguments_are_named(problem):
     with pytest.raises(ValueError, match="loss must be one of relative, relative_to_coarse"):
         sil.train(
