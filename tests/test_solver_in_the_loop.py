@@ -1,7 +1,8 @@
 """Solver in the loop (sphjax.surrogate.solver_in_the_loop) at CI size: a coarse 8x8
 Taylor-Green run corrected towards a 16x16 one.  Cost: 58 s of CPU time, nearly all
 compilation (the fine reference, two rollouts, one training step); 3.5 min wall clock
-measured on the shared, loaded 2-core machine.
+measured on the shared, loaded 2-core machine; the test of the loss relative to the coarse
+solver adds 17 s wall (alone on the machine).
 """
 
 from __future__ import annotations
@@ -63,7 +64,72 @@ def test_a_learning_rate_schedule_reaches_the_optimiser(problem):
     np.testing.assert_array_equal(losses[3:], losses[3])  # the later ones did not
 
 
+def test_the_loss_relative_to_the_coarse_solver_by_hand_and_training_lowers_it(problem):
+    """``loss="relative_to_coarse"`` is ``mean_k e_k^2 / (e^c_k)^2`` over the window: 1 for
+    the untrained (zero) correction, which is the coarse solver; after twelve updates the
+    recorded loss (the schedule then stops the updates, so the last losses are those of
+    the returned network) equals the value computed by hand from :func:`errors`, and is
+    lower than the coarse solver's."""
+    import optax
+
+    net = sil.Corrector(problem, jax.random.PRNGKey(0))
+    coarse = sil.errors(problem, None)[0, 1:]
+    np.testing.assert_allclose(sil.coarse_weights(problem)[0, 1:], 1 / coarse**2)
+    schedule = optax.piecewise_constant_schedule(1e-2, {12: 0.0})
+    result = sil.train(
+        problem,
+        net,
+        unroll=4,
+        iterations=14,
+        lr=schedule,
+        loss="relative_to_coarse",
+        log=lambda s: None,
+    )
+    losses = np.asarray(result.losses)
+    assert losses[0] == pytest.approx(1.0, rel=1e-9)
+    trained = sil.errors(problem, result.net)[0, 1:]
+    by_hand = np.mean(trained**2 / coarse**2)
+    assert losses[13] == pytest.approx(by_hand, rel=1e-9)
+    assert by_hand < 0.9
+
+
+def test_the_density_input_reaches_the_network(problem):
+    """``Corrector(density=True)``: one more node input, ``(rho / rho0 - 1) (c0 / U)^2``;
+    with a non-zero decoder, a change of the density alone changes the correction, which
+    it does not without the input (eager calls on the 64 coarse particles)."""
+    import equinox as eqx
+
+    state = problem.coarse.state
+    graph = sil._graph(problem)
+    nbrs = sil.allocate(problem)
+    denser = state.replace(density=state.density * 1.002)
+    for density in (True, False):
+        net = sil.Corrector(problem, jax.random.PRNGKey(0), density=density)
+        last = net.gns.decoder.weights[-1]
+        net = eqx.tree_at(lambda n: n.gns.decoder.weights[-1], net, last + 0.1)
+        # node inputs: the velocity (2), the density (1 or none), the type embedding (8)
+        assert net.gns.node_encoder.weights[0].shape[0] == 2 + density + 8
+        a, _ = net(state, graph, nbrs, problem.speed)
+        b, _ = net(denser, graph, nbrs, problem.speed)
+        change = float(np.abs(np.asarray(a) - np.asarray(b)).max())
+        if density:
+            params = problem.coarse.params
+            c0, rho0 = float(params.sound_speed), float(params.reference_density)
+            assert net.density == pytest.approx((rho0, (c0 / problem.speed) ** 2))
+            assert change > 1e-6 * float(np.abs(np.asarray(a)).max())
+        else:
+            assert net.density is None and change == 0.0
+
+
 def test_bad_arguments_are_named(problem):
+    with pytest.raises(ValueError, match="loss must be one of relative, relative_to_coarse"):
+        sil.train(
+            problem,
+            sil.Corrector(problem, jax.random.PRNGKey(0)),
+            unroll=4,
+            iterations=1,
+            loss="mse",
+        )
     with pytest.raises(ValueError, match="unroll must lie in 1..4"):
         sil.train(problem, sil.Corrector(problem, jax.random.PRNGKey(0)), unroll=5, iterations=1)
     with pytest.raises(ValueError, match="lr must be a positive number or an optax schedule"):

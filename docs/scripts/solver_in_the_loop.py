@@ -89,6 +89,21 @@ def main(argv=None) -> dict:
     p.add_argument("--train-alpha", type=float, nargs="+", default=[0.05, 0.15])
     p.add_argument("--test-alpha", type=float, default=0.1)
     p.add_argument("--latent", type=int, default=16)
+    p.add_argument(
+        "--message-passing", type=int, default=2, help="message-passing steps of the network"
+    )
+    p.add_argument(
+        "--density-input",
+        action="store_true",
+        help="the network also sees the density deviation (Corrector(density=True))",
+    )
+    p.add_argument(
+        "--loss",
+        choices=list(sil.LOSSES),
+        default="relative",
+        help="relative: mean squared relative error over the window; relative_to_coarse: "
+        "each step's divided by the coarse solver's own (train(loss=...))",
+    )
     p.add_argument("--lr", type=float, default=1e-3)
     p.add_argument(
         "--iterations",
@@ -174,7 +189,13 @@ def main(argv=None) -> dict:
         if args.gravity_scale and mode == "correction":
             scale = float(np.linalg.norm(np.asarray(coarse.params.gravity))) * train_problem.dt
         net = sil.Corrector(
-            train_problem, jax.random.PRNGKey(0), mode=mode, latent=args.latent, scale=scale
+            train_problem,
+            jax.random.PRNGKey(0),
+            mode=mode,
+            latent=args.latent,
+            steps=args.message_passing,
+            scale=scale,
+            density=args.density_input,
         )
         previous = dict(iterations=0, seconds=0.0, cpu_seconds=0.0, losses=[], pieces=0)
         if args.resume is not None:
@@ -194,6 +215,7 @@ def main(argv=None) -> dict:
             seconds=seconds,
             iterations=args.iterations,
             lr=lr,
+            loss=args.loss,
             seed=previous["iterations"],  # a resumed piece draws new windows
         )
         record = dict(

@@ -46,6 +46,7 @@ from sphjax.surrogate.gns import GNS
 from sphjax.surrogate.graph import RadiusGraph, overflowed
 
 MODES = ("correction", "gns")
+LOSSES = ("relative", "relative_to_coarse")
 
 
 def probe_grid(case: Case, per_side: int, box=None) -> np.ndarray:
@@ -238,20 +239,43 @@ class Corrector(eqx.Module):
 
     gns: GNS
     scale: float = eqx.field(static=True)
+    # (rho0, (c0 / U)^2) when the density is an input, else None
+    density: tuple | None = eqx.field(static=True)
 
     def __init__(
-        self, problem: Problem, key, mode: str = "correction", latent=16, steps=2, scale=None
+        self,
+        problem: Problem,
+        key,
+        mode: str = "correction",
+        latent=16,
+        steps=2,
+        scale=None,
+        density: bool = False,
     ):
         """``scale``: velocity per unit network output and step (default ``0.01 U`` for
         the correction, ``2 pi U^2 dt`` for the pure network, ``U = problem.speed``).  For a
         flow that starts at rest give the correction about the solver's own velocity change
-        per step (the dam break: ``|g| dt``); ``0.01 sqrt(g H)`` is nine times that there."""
+        per step (the dam break: ``|g| dt``); ``0.01 sqrt(g H)`` is nine times that there.
+
+        The network's node inputs are the velocities ``v / U``; with ``density=True`` also
+        the density deviation ``(rho / rho0 - 1) (c0 / U)^2`` (the pressure over ``rho0
+        U^2`` to first order, eq. 12, with the coarse case's ``rho0`` and ``c0``), which
+        carries the acoustic waves that the velocities alone show only after they act.
+        ``steps``: message-passing steps (each widens what a particle sees by one
+        neighbour radius)."""
         if mode not in MODES:
             raise ValueError(f"mode must be one of {', '.join(MODES)}, got {mode!r}")
         if scale is not None and not float(scale) > 0:
             raise ValueError(f"scale must be a positive velocity per step, got {scale}")
         d = problem.coarse.model.dim
-        gns = GNS(d, 2 * d + 1, d, key, latent=latent, hidden=latent, steps=steps)
+        self.density = None
+        if density:
+            params = problem.coarse.params
+            rho0 = float(np.asarray(params.reference_density))
+            c0 = float(np.asarray(params.sound_speed))
+            self.density = (rho0, (c0 / problem.speed) ** 2)
+        node_in = d + (1 if density else 0)
+        gns = GNS(node_in, 2 * d + 1, d, key, latent=latent, hidden=latent, steps=steps)
         # start from "no correction": the zero decoder output (the coarse solver exactly)
         last = gns.decoder.weights[-1]
         gns = eqx.tree_at(lambda g: g.decoder.weights[-1], gns, jnp.zeros_like(last))
@@ -277,7 +301,12 @@ class Corrector(eqx.Module):
         edge = jnp.where(mask[..., None], jnp.concatenate([dr, r, dv], -1), 0.0)
         fluid = (state.kind == Kind.FLUID)[:, None]
         types = jnp.where(fluid[:, 0], 0, 1).astype(jnp.int32)  # fluid 0, wall 1
-        out = self.gns(v / speed, types, edge, senders, mask)
+        nodes = v / speed
+        if self.density is not None:
+            rho0, factor = self.density
+            deviation = (state.density / rho0 - 1.0) * factor
+            nodes = jnp.concatenate([nodes, deviation[:, None].astype(v.dtype)], -1)
+        out = self.gns(nodes, types, edge, senders, mask)
         return jnp.where(fluid, self.scale * out, 0.0), neighbors
 
 
@@ -364,6 +393,23 @@ def errors(
     return np.stack(out)
 
 
+def coarse_weights(problem: Problem) -> np.ndarray:
+    """``1 / (e^c_k)^2`` ``[n_conditions, horizon + 1]``: the weights of
+    ``train(loss="relative_to_coarse")``, from the coarse solver's own error ``e^c_k``
+    (:func:`errors` with ``net=None``; step 0 is never in a loss and weighs 0).  Refuses
+    a coarse error of zero after step 0 (a coarse run that is the reference leaves no
+    ratio to optimise)."""
+    coarse = errors(problem, None)
+    if not np.all(coarse[:, 1:] > 0):
+        raise ValueError(
+            'loss="relative_to_coarse" needs a non-zero coarse-solver error at every step '
+            'after the start (the coarse run equals the reference); use loss="relative"'
+        )
+    weights = np.zeros_like(coarse)
+    weights[:, 1:] = 1.0 / coarse[:, 1:] ** 2
+    return weights
+
+
 @dataclasses.dataclass
 class TrainResult:
     net: object
@@ -385,20 +431,34 @@ def train(
     clip: float = 1.0,
     refresh_every: int = 25,
     seed: int = 0,
+    loss: str = "relative",
     log=print,
 ) -> TrainResult:
     """Train ``net`` by back-propagating through ``unroll`` coarse steps (solver included).
 
     Each iteration draws a condition and a start step ``s`` (a multiple of ``unroll``);
     the start state is the model's own rollout at ``s`` (refreshed every
-    ``refresh_every`` iterations, no gradient through it), the loss the mean over the
-    ``unroll`` steps of the squared relative probe-velocity error against the fine
-    reference.  Adam with gradients clipped to global norm ``clip``; ``lr`` is a number or
+    ``refresh_every`` iterations, no gradient through it).  The loss over the window's
+    steps ``k = s+1 .. s+unroll``, with ``e_k`` the relative probe-velocity error against
+    the fine reference:
+
+    - ``loss="relative"`` (default): ``mean_k e_k^2``; steps where every model errs little
+      (a start-up transient's minima) weigh little.
+    - ``loss="relative_to_coarse"``: ``mean_k e_k^2 / (e^c_k)^2``, ``e^c_k`` the coarse
+      solver's own error at step ``k`` from the case's initial state (computed once per
+      condition before training, no gradient through it): the mean squared ratio to the
+      coarse solver, which weighs every step by what the comparison asks of it (at most
+      a fraction of the coarse error at each step).  The untrained (zero) correction
+      gives 1 on a window from step 0.
+
+    Adam with gradients clipped to global norm ``clip``; ``lr`` is a number or
     an optax schedule of the iteration (e.g. ``optax.exponential_decay``, so the steps
     shrink as the correction settles).  Budget:
     ``iterations`` and/or wall-clock ``seconds`` (after compiling); the result also
     records the process's CPU seconds over the same span.
     """
+    if loss not in LOSSES:
+        raise ValueError(f"loss must be one of {', '.join(LOSSES)}, got {loss!r}")
     if iterations is None and seconds is None:
         raise ValueError("give iterations or seconds (the training budget)")
     if not callable(lr) and not float(lr) > 0:
@@ -410,19 +470,25 @@ def train(
     neighbors = allocate(problem)
     n_starts = problem.horizon // unroll
     reference = jnp.asarray(problem.reference)
+    # per condition and step 0..horizon, the weight of e_k^2 in the loss
+    if loss == "relative_to_coarse":
+        weights = coarse_weights(problem)
+    else:
+        weights = np.ones(problem.reference.shape[:2])
+    weights = jnp.asarray(weights, reference.dtype)
 
-    def loss_fn(net, state, params, ref):
+    def loss_fn(net, state, params, ref, weight):
         _, fields, over = rollout(problem, net, mode, state, params, unroll, neighbors)
-        return jnp.mean(relative_error(fields, ref) ** 2), over
+        return jnp.mean(weight * relative_error(fields, ref) ** 2), over
 
     # clipped gradients: an unrolled solver has occasional large gradients
     optimizer = optax.chain(optax.clip_by_global_norm(clip), optax.adam(lr))
     opt_state = optimizer.init(eqx.filter(net, eqx.is_array))
 
     @eqx.filter_jit
-    def update(net, opt_state, state, params, ref):
+    def update(net, opt_state, state, params, ref, weight):
         (loss, over), grads = eqx.filter_value_and_grad(loss_fn, has_aux=True)(
-            net, state, params, ref
+            net, state, params, ref, weight
         )
         leaves = jax.tree_util.tree_leaves(eqx.filter(grads, eqx.is_array))
         finite = jnp.all(jnp.stack([jnp.all(jnp.isfinite(g)) for g in leaves]))
@@ -459,20 +525,25 @@ def train(
         c = int(rng.integers(len(problem.conditions)))
         j = int(rng.integers(n_starts))
         state = jax.tree_util.tree_map(lambda a, j=j: a[j], starts[c])
-        ref = reference[c, j * unroll + 1 : (j + 1) * unroll + 1]
-        new_net, new_opt_state, loss, over, finite = update(
-            net, opt_state, state, problem.conditions[c][0], ref
+        window = slice(j * unroll + 1, (j + 1) * unroll + 1)
+        new_net, new_opt_state, value, over, finite = update(
+            net,
+            opt_state,
+            state,
+            problem.conditions[c][0],
+            reference[c, window],
+            weights[c, window],
         )
         if bool(over):
             raise RuntimeError("the correction's neighbour list overflowed; raise its capacity")
         if not bool(finite):  # Adam would write NaN into every weight
             raise FloatingPointError(
                 f"train: the gradient through the unrolled solver is not finite at iteration "
-                f"{k + 1} (condition {c}, start {j}, loss {float(loss):.4g}); stopped before "
+                f"{k + 1} (condition {c}, start {j}, loss {float(value):.4g}); stopped before "
                 f"an update that would make every weight NaN: lower lr or unroll, or use float64"
             )
         net, opt_state = new_net, new_opt_state
-        losses.append(float(loss))
+        losses.append(float(value))
         k += 1
         if k == 1:
             t0, c0 = time.perf_counter(), time.process_time()  # budget: after compiling
