@@ -397,8 +397,11 @@ def test_a_buoyant_gravity_that_is_no_2d_vector_is_refused(bad):
 
 def test_gravity_beside_a_buoyant_gravity_is_refused_before_the_first_step():
     """With ``buoyant_gravity`` the body's buoyancy is in its weight; a fluid with gravity
-    too would add it again through the hydrostatic pressure: one line, before any step."""
+    too would add it again through the hydrostatic pressure: one line, before any step, in
+    both drivers (``simulate`` and the diffrax path)."""
     case = sphjax.cases.settling_disk(n=4, t_end=0.01)
     case = case.replace(params=case.params.replace(gravity=jnp.array([0.0, -980.0])))
     with pytest.raises(ValueError, match=r"buoyancy twice; set gravity to zero"):
         sphjax.simulate(case, n_steps=2)
+    with pytest.raises(ValueError, match=r"buoyancy twice; set gravity to zero"):
+        sphjax.diffeqsolve_case(case, t1=2 * case.dt)

@@ -36,7 +36,7 @@ from sphjax.core.state import State
 from sphjax.integration._kdk import KickDriftKick
 from sphjax.integration._term import Phase, Rates, SPHArgs, SPHTerm
 from sphjax.integration.simulate import _is_traced
-from sphjax.physics.rhs import build_neighbors
+from sphjax.physics.rhs import build_neighbors, check_system_params
 from sphjax.physics.solid.system import SolidSystem
 
 
@@ -118,6 +118,8 @@ def diffeqsolve_case(
         if max_steps is None:
             max_steps = int(math.ceil(float(t1) / float(dt) - 1e-9)) + 1
     args = sph_args(case, params, state)
+    if not _is_traced(args.params):
+        check_system_params(case.model, args.params)
     y0 = initial_phase(case, args)
     return diffrax.diffeqsolve(
         SPHTerm(case.model),

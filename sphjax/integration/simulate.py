@@ -55,6 +55,7 @@ from sphjax.physics.rhs import (
     UPDATE_FIELDS,
     build_neighbors,
     check_params,
+    check_system_params,
     system_blocks,
     with_reference,
 )
@@ -503,9 +504,7 @@ def simulate(
     traced = _is_traced(params, state, dt)
     if not traced:
         _check_finite(state)
-        for system in model.systems:
-            if hasattr(system, "check_params"):
-                system.check_params(params)
+        check_system_params(model, params)
         check_time_step(float(dt), state, model, params)
         _check_inside(state, model)
     dt = device_array(dt, state.position.dtype)

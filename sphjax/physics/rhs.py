@@ -181,6 +181,15 @@ def check_params(model, params):
             )
 
 
+def check_system_params(model, params):
+    """Each system's own refusal of concrete ``params`` (its optional ``check_params``,
+    e.g. :meth:`sphjax.RigidSystem.check_params`); the drivers call it before the first
+    step, outside any trace."""
+    for system in model.systems:
+        if hasattr(system, "check_params"):
+            system.check_params(params)
+
+
 def evaluate(state: State, neighbors: Neighbors, model, params, density_step=None) -> State:
     """Rates of change of ``state`` (eqs. 5, 10-12 for fluids; 14-19 for solids).
 

@@ -47,8 +47,8 @@ Methods:
   ``parameters()``, ``unused_parameters()``: the Params fields it reads and a one-line
     refusal for each of its group's fields it does not read (the honest-API rule).
   ``check_params(params)`` (optional): refuse, in one line, concrete Params that
-    contradict one of its choices (``simulate`` calls it before a concrete run;
-    :meth:`sphjax.RigidSystem.check_params`).
+    contradict one of its choices (``simulate`` and ``diffeqsolve_case`` call it before a
+    concrete run; :meth:`sphjax.RigidSystem.check_params`).
 """
 
 from __future__ import annotations
