@@ -29,6 +29,18 @@ WATER_DENSITY = 1000.0
 GAMMA = 7.0
 
 
+def _body_in_tank(h, kernel, domain, rigid, **viscosity) -> Model:
+    """The Model of a rigid body in a walled tank of water, shared by the cases below:
+    continuity density with Molteni's diffusion, Tait (eqs. 11-12), no-slip walls, the
+    fluid's viscosity as given (``artificial_viscosity=True`` or
+    ``physical_viscosity=True``)."""
+    fluid = fluid_system(
+        density="continuity", gamma=GAMMA, density_diffusion="molteni", **viscosity
+    )
+    systems = (fluid, wall_system("no_slip"), rigid)
+    return Model(dim=2, smoothing_length=h, kernel=kernel, domain=domain, systems=systems)
+
+
 def floating_body(
     n: int = 10,
     body_width: float = 0.2,
@@ -249,22 +261,7 @@ class _BodyInTank:
         domain = Domain(
             (-margin, -margin), (W + margin, 2.0 * tank_height + margin), (False, False)
         )
-        model = Model(
-            dim=2,
-            smoothing_length=h,
-            kernel=kernel,
-            domain=domain,
-            systems=(
-                fluid_system(
-                    density="continuity",
-                    gamma=GAMMA,
-                    artificial_viscosity=True,
-                    density_diffusion="molteni",
-                ),
-                wall_system("no_slip"),
-                rigid,
-            ),
-        )
+        model = _body_in_tank(h, kernel, domain, rigid, artificial_viscosity=True)
         info = dict(
             n=self.n,
             dx=dx,
@@ -421,22 +418,8 @@ def settling_disk(
 
     margin = (layers + 2) * dx
     domain = Domain((-margin, -margin), (W + margin, H + margin), (False, False))
-    model = Model(
-        dim=2,
-        smoothing_length=h,
-        kernel=kernel,
-        domain=domain,
-        systems=(
-            fluid_system(
-                density="continuity",
-                gamma=GAMMA,
-                physical_viscosity=True,
-                density_diffusion="molteni",
-            ),
-            wall_system("no_slip"),
-            RigidSystem(SolidBoundary(no_slip=True), buoyant_gravity=(0.0, -g)),
-        ),
-    )
+    rigid = RigidSystem(SolidBoundary(no_slip=True), buoyant_gravity=(0.0, -g))
+    model = _body_in_tank(h, kernel, domain, rigid, physical_viscosity=True)
     info = dict(
         n=n,
         dx=dx,
