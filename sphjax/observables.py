@@ -160,7 +160,7 @@ def probe_pressure(states, case: Case, point):
     Args:
       states: a State (or a Trajectory's ``states``), with or without a leading time axis.
       point: ``[d]`` probe position, e.g. ``(case.info["tank_length"], 0.16)`` on the
-        right wall of a dam break.
+        right wall of a dam break (:func:`sphjax.cases.dam_break_wall_sensors`).
     Returns:
       the pressure, ``[T]`` or a scalar; differentiable (jax.numpy).
     """

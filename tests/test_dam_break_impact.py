@@ -1,11 +1,12 @@
 """Dam-break impact on the right wall against Buchner's (2002) experiment (slow).
 
-Set-up of Zhou et al. (1999), Buchner (2002) and Colagrossi & Landrini (2003): a column
-``2H`` wide and ``H = 0.6 m`` high at the left of a tank ``5.366 H`` long; pressure sensor
-P1 on the right wall at ``y = 0.16 m``.  Free-slip walls and Monaghan ``alpha = 0.02``, as
-the reference SPH runs of this case use.  The probe is
-:func:`sphjax.observables.probe_pressure` (kernel average of the fluid's pressure) at the
-wall's face.  CI size: H / dx = 15; about 60 s on an idle core.
+Set-up of Zhou et al. (1999), Buchner (2002) and Colagrossi & Landrini (2003),
+:func:`sphjax.cases.dam_break_impact`: a column ``2H`` wide and ``H = 0.6 m`` high at the
+left of a tank ``5.366 H`` long; pressure sensor P1 on the right wall at ``y = 0.16 m``.
+Free-slip walls and Monaghan ``alpha = 0.02``, as the reference SPH runs of this case use.
+The probe is :func:`sphjax.observables.probe_pressure` (kernel average of the fluid's
+pressure) at the wall's face, at :func:`sphjax.cases.dam_break_wall_sensors`.  CI size:
+H / dx = 15; about 60 s on an idle core.
 
 Reference: B. Buchner, "Green water on ship-type offshore structures", PhD thesis, TU Delft
 (2002), sensor P1, as digitised in TrixiParticles.jl (validation/dam_break_2d/
@@ -22,7 +23,7 @@ import numpy as np
 import pytest
 
 import sphjax
-from sphjax.cases import probe_pressure
+from sphjax.cases import dam_break_impact, dam_break_wall_sensors, probe_pressure
 
 pytestmark = pytest.mark.slow
 
@@ -59,14 +60,7 @@ DE_COURCY_PLATEAU = {0.006: 1.260, 0.03: 1.160, 0.06: 0.970, 0.16: 0.185}
 
 @pytest.fixture(scope="module")
 def p1():
-    case = sphjax.cases.dam_break(
-        n=30,
-        column_width=2 * H,
-        column_height=H,
-        tank_length_factor=5.366 / 2,
-        wall_slip="free_slip",
-        artificial_alpha=0.02,
-    )
+    case = dam_break_impact(n=30)
     scale = math.sqrt(H / G)
     save_every = max(1, int(0.01 * scale / case.dt))
     n_steps = save_every * int(3.5 * scale / case.dt / save_every)
@@ -78,10 +72,11 @@ def p1():
     run = jax.jit(lambda p: sphjax.simulate(case, p, n_steps=n_steps, save_every=save_every))
     traj = run(case.params)
     T = np.asarray(traj.times) / scale
+    # De Courcy et al.'s four sensors, keyed by height (their P4 is Buchner's P1)
+    sensors = dam_break_wall_sensors(case).values()
     p = {
-        y: np.asarray(probe_pressure(traj.states, case, (case.info["tank_length"], y)))
-        / (1000.0 * G * H)
-        for y in (P1_HEIGHT, *DE_COURCY_PLATEAU)
+        y: np.asarray(probe_pressure(traj.states, case, (x, y))) / (1000.0 * G * H)
+        for x, y in sensors
     }
     return T, p
 

@@ -443,6 +443,9 @@ def dam_break(n, rows, density_diffusion="molteni"):
 
 #: heights (m) on the right wall at which the impact's pressure profile is measured
 IMPACT_HEIGHTS = (0.06, 0.08, 0.10, 0.12, 0.14, 0.16, 0.18, 0.20)
+IMPACT_PROFILE = {f"y = {y:.2f} m": y for y in IMPACT_HEIGHTS}
+#: Buchner's (2002) sensor P1: De Courcy et al.'s (2024) P4, y = 0.16 m
+BUCHNER_P1_SENSOR = "P4"
 #: the section where the flow arriving at the wall is measured: this far before it (m)
 IMPACT_SECTION = 0.5
 
@@ -467,9 +470,8 @@ def impact_diagnostics(traj, case, T, window):
     scale = 1000.0 * g * H
     states = traj.states
     profile = [
-        float(np.mean(np.asarray(sphjax.cases.probe_pressure(states, case, (wall, y)))[window]))
-        / scale
-        for y in IMPACT_HEIGHTS
+        float(np.mean(np.asarray(sphjax.cases.probe_pressure(states, case, point))[window])) / scale
+        for point in sphjax.cases.dam_break_wall_sensors(case, IMPACT_PROFILE).values()
     ]
     section = wall - IMPACT_SECTION
     force, depth, speed, flux = [], [], [], []
@@ -517,22 +519,14 @@ def dam_break_impact(runs, rows, t_end=3.6):
     window_ref = np.linspace(2.8, 3.5, 701)
     mean_ref = float(np.mean(np.interp(window_ref, BUCHNER_P1[:, 0], BUCHNER_P1[:, 1])))
     for n, diffusion, c_factor in runs:
-        case = sphjax.cases.dam_break(
-            n=n,
-            column_width=2 * H,
-            column_height=H,
-            tank_length_factor=5.366 / 2,
-            wall_slip="free_slip",
-            artificial_alpha=0.02,
-            density_diffusion=diffusion,
-            sound_speed_factor=c_factor,
+        case = sphjax.cases.dam_break_impact(
+            n=n, density_diffusion=diffusion, sound_speed_factor=c_factor
         )
         traj, seconds = run(case, t_end * scale, frames=int(t_end / 0.01))
         wall += seconds
         T = np.asarray(traj.times) / scale
-        p = np.asarray(
-            sphjax.cases.probe_pressure(traj.states, case, (case.info["tank_length"], 0.16))
-        ) / (1000.0 * g * H)
+        sensor = sphjax.cases.dam_break_wall_sensors(case)[BUCHNER_P1_SENSOR]
+        p = np.asarray(sphjax.cases.probe_pressure(traj.states, case, sensor)) / (1000.0 * g * H)
         label = f"H/dx={n // 2}, {diffusion}" + ("" if c_factor == 20 else f", c0={c_factor:g}")
         arrival = float(T[np.argmax(p > 0.15)])
         window = (T >= 2.8) & (T <= 3.5)
@@ -838,9 +832,10 @@ def main():
         "friction.",
         "",
         "`dam_break_impact`: the dam break of Zhou et al. (1999) and Buchner (2002) (column",
-        "1.2 m wide and H = 0.6 m high, tank 5.366 H long; `dam_break(column_width=1.2,",
-        'column_height=0.6, tank_length_factor=2.683, wall_slip="free_slip",',
-        "artificial_alpha=0.02)`), pressure on the right wall at sensor P1 (y = 0.16 m) from",
+        "1.2 m wide and H = 0.6 m high, tank 5.366 H long; `sphjax.cases.dam_break_impact(n)`,",
+        "`dam_break(column_width=1.2, column_height=0.6, tank_length_factor=2.683,",
+        'wall_slip="free_slip", artificial_alpha=0.02)`), pressure on the right wall at',
+        'sensor P1 (y = 0.16 m, `dam_break_wall_sensors(case)["P4"]`) from',
         "`sphjax.cases.probe_pressure` (kernel average of the fluid's pressure at the wall's",
         "face), in units of rho0 g H against t sqrt(g/H).  Reference: Buchner's measurement",
         "of P1 (PhD thesis, TU Delft 2002), as digitised in TrixiParticles.jl.  Filter: the",

@@ -5,10 +5,11 @@
     python docs/scripts/validate_impact.py --table --filter 0.05
 
 The dam break of Zhou et al. (1999) and Buchner (2002) as TrixiParticles.jl sets it up
-(column 1.2 x 0.6 m, tank 5.366 H long, free-slip walls, Monaghan alpha = 0.02,
-c0 = 20 sqrt(g H)), observed by `sphjax.observables.probe_pressure` at the centres of the
-four wall sensors of De Courcy et al. (2024, incompressible delta-SPH at H/dx = 400;
-`docs/data/decourcy_2024_dam_break_wall_pressure.csv`).  Both series, the simulation's
+(`sphjax.cases.dam_break_impact`: column 1.2 x 0.6 m, tank 5.366 H long, free-slip walls,
+Monaghan alpha = 0.02, c0 = 20 sqrt(g H)), observed by `sphjax.observables.probe_pressure`
+at the centres of the four wall sensors of De Courcy et al. (2024, incompressible
+delta-SPH at H/dx = 400; `docs/data/decourcy_2024_dam_break_wall_pressure.csv`;
+`sphjax.cases.dam_break_wall_sensors`).  Both series, the simulation's
 and the reference's, get the same filter: linear interpolation onto a grid of 0.0025 in
 t sqrt(g/H) and a centred running mean over ``FILTER`` (``--filter``).  Compared: the
 first peak (the largest filtered value in ``PEAK_WINDOW``) and its time, and the plateau
@@ -28,12 +29,14 @@ import time
 
 import numpy as np
 
+from sphjax.cases import DAM_BREAK_WALL_SENSORS
+
 DOCS = pathlib.Path(__file__).resolve().parents[1]
 REFERENCE = DOCS / "data" / "decourcy_2024_dam_break_wall_pressure.csv"
 RESULTS = DOCS / "data" / "dam_break_impact_sensors.jsonl"
 FIGURE = DOCS / "figures" / "dam_break_impact_sensors.png"
 H, G = 0.6, 9.81
-SENSORS = {"P1": 0.006, "P2": 0.030, "P3": 0.060, "P4": 0.160}
+SENSORS = DAM_BREAK_WALL_SENSORS  # De Courcy et al.'s P1-P4: name -> height (m)
 FRAME = 0.005  # frame spacing, t sqrt(g/H)
 T_END = 3.6
 FILTER = 0.1  # running-mean width, t sqrt(g/H) (as the impact figure of validate_fluid.py)
@@ -79,14 +82,7 @@ def run(n: int, float64: bool) -> dict:
     import sphjax
     from sphjax.observables import probe_pressure
 
-    case = sphjax.cases.dam_break(
-        n=n,
-        column_width=2 * H,
-        column_height=H,
-        tank_length_factor=5.366 / 2,
-        wall_slip="free_slip",
-        artificial_alpha=0.02,
-    )
+    case = sphjax.cases.dam_break_impact(n=n)
     scale = np.sqrt(H / G)
     save_every = max(1, int(round(FRAME * scale / case.dt)))
     n_steps = save_every * int(np.ceil(T_END * scale / case.dt / save_every))
@@ -96,9 +92,8 @@ def run(n: int, float64: bool) -> dict:
     wall, cpu = time.perf_counter() - t0, time.process_time() - c0
     T = np.asarray(traj.times) / scale
     pressure = {
-        name: np.asarray(probe_pressure(traj.states, case, (case.info["tank_length"], y)))
-        / (1000.0 * G * H)
-        for name, y in SENSORS.items()
+        name: np.asarray(probe_pressure(traj.states, case, point)) / (1000.0 * G * H)
+        for name, point in sphjax.cases.dam_break_wall_sensors(case, SENSORS).items()
     }
     return dict(
         n=n,

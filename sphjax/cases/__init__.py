@@ -13,7 +13,10 @@ from sphjax.cases._resolution import n_for_spacing
 from sphjax.cases.cavity import lid_driven_cavity
 from sphjax.cases.channel import channel_flow
 from sphjax.cases.fluid import (
+    DAM_BREAK_WALL_SENSORS,
     dam_break,
+    dam_break_impact,
+    dam_break_wall_sensors,
     hydrostatic_tank,
     poiseuille,
     poiseuille_startup_speed,
@@ -134,6 +137,9 @@ __all__ = [
     "centreline_profiles",
     "hydrostatic_tank",
     "dam_break",
+    "dam_break_impact",
+    "dam_break_wall_sensors",
+    "DAM_BREAK_WALL_SENSORS",
     "surge_front",
     "probe_pressure",
     "oscillating_plate",

@@ -1,9 +1,12 @@
-"""Fluid validation cases: Taylor-Green, Poiseuille, hydrostatic tank, dam break."""
+"""Fluid validation cases: Taylor-Green, Poiseuille, hydrostatic tank, dam break (Martin &
+Moyce's surge, and Zhou et al.'s and Buchner's impact on a wall with pressure sensors)."""
 
 from __future__ import annotations
 
 import functools
 import math
+import numbers
+from collections.abc import Mapping
 
 import jax
 import jax.numpy as jnp
@@ -457,10 +460,9 @@ def dam_break(
     ``alpha = 0.1`` (the experiment had wall friction; free-slip walls with ``alpha = 0.02``
     run 12-17 % ahead of it at ``T = 2-2.3``, see docs/validation.md).
 
-    The other common set-up, with a pressure probe on the right wall (Zhou et al. 1999,
-    Buchner 2002, Colagrossi & Landrini 2003): ``column_width=1.2, column_height=0.6,
-    tank_length_factor=2.6833`` (a tank 5.366 H long); measure the wall pressure with
-    :func:`sphjax.observables.probe_pressure` at ``(case.info["tank_length"], y)``.
+    The other common set-up, with pressure sensors on the right wall (Zhou et al. 1999,
+    Buchner 2002, Colagrossi & Landrini 2003), is :func:`dam_break_impact`; its sensors'
+    positions are :func:`dam_break_wall_sensors`.
 
     Args:
       n: particles across the column width (``dx = L / n``).
@@ -503,11 +505,91 @@ def dam_break(
     )
 
 
+#: pressure sensors on the right wall of that dam break: name -> the sensor's centre
+#: height (m), De Courcy et al. (2024), "Incompressible delta-SPH via artificial
+#: compressibility", CMAME 420, 116700; their P4 is at the height of Buchner's (2002) P1
+DAM_BREAK_WALL_SENSORS = {"P1": 0.006, "P2": 0.030, "P3": 0.060, "P4": 0.160}
+
+
+def dam_break_impact(
+    n: int = 30,
+    sound_speed_factor: float = 20.0,
+    density_diffusion: str | None = "molteni",
+    t_end: float | None = None,
+) -> Case:
+    """The dam break against a wall with pressure sensors: Zhou et al. (1999), Buchner
+    (2002), Colagrossi & Landrini (2003), De Courcy et al. (2024).
+
+    A column ``2H`` wide and ``H = 0.6 m`` high at the left of a tank ``5.366 H`` long
+    (3.22 m); free-slip walls and Monaghan ``alpha = 0.02``, as the reference SPH runs of
+    this case use (TrixiParticles.jl, De Courcy et al.).  It
+    is :func:`dam_break` with those arguments (its name is ``"dam_break"``); the surge
+    hits the right wall at ``t sqrt(g / H) = 2.49`` (Buchner's sensor P1).  The sensors'
+    positions are :func:`dam_break_wall_sensors`; read the wall pressure there with
+    :func:`sphjax.observables.probe_pressure`.
+
+    Args:
+      n: particles across the column width ``2H`` (``dx = 2H / n``; ``H / dx = n / 2``).
+      sound_speed_factor: ``c0 = sound_speed_factor sqrt(g H)``.
+      density_diffusion: as :func:`dam_break`'s.
+      t_end: as :func:`dam_break`'s (default ``3 sqrt(H / g)``).
+    """
+    sound_speed_factor = check_positive("sound_speed_factor", sound_speed_factor)
+    H = 0.6
+    return dam_break(
+        n=n,
+        column_width=2 * H,
+        column_height=H,
+        tank_length_factor=5.366 / 2,  # 5.366 H over the column's width 2 H
+        wall_slip="free_slip",
+        artificial_alpha=0.02,
+        density_diffusion=density_diffusion,
+        sound_speed_factor=sound_speed_factor,
+        t_end=t_end,
+    )
+
+
+def dam_break_wall_sensors(case: Case, heights: Mapping | None = None) -> dict:
+    """Positions of pressure sensors on the right wall's face of a 2D dam break
+    (:func:`dam_break_impact`, :func:`dam_break`): ``(case.info["tank_length"], y)``.
+
+    Args:
+      case: the dam break.
+      heights: sensor name -> height (m) above the floor; default
+        :data:`DAM_BREAK_WALL_SENSORS`, De Courcy et al.'s (2024) P1-P4 at 0.006, 0.030,
+        0.060 and 0.160 m (P4 at Buchner's 2002 P1).
+    Returns:
+      ``{name: (x, y)}``, the points to give :func:`sphjax.observables.probe_pressure`.
+    """
+    info = getattr(case, "info", None)
+    dim = getattr(getattr(case, "model", None), "dim", None)
+    if not isinstance(info, Mapping) or "tank_length" not in info or dim != 2:
+        raise ValueError(
+            "case must be a 2D dam break (sphjax.cases.dam_break_impact or dam_break), got "
+            + show(getattr(case, "name", case))
+        )
+    if heights is None:
+        heights = DAM_BREAK_WALL_SENSORS
+    if not isinstance(heights, Mapping) or not all(
+        isinstance(y, numbers.Real) and not isinstance(y, bool) and 0 <= y < math.inf
+        for y in heights.values()
+    ):
+        raise ValueError(
+            "heights must map sensor names to heights on the wall in metres (>= 0), "
+            f"e.g. {DAM_BREAK_WALL_SENSORS}, got {show(heights)}"
+        )
+    wall = info["tank_length"]
+    return {name: (wall, y) for name, y in heights.items()}
+
+
 __all__ = [
     "taylor_green",
     "taylor_green_velocity",
     "poiseuille",
     "hydrostatic_tank",
     "dam_break",
+    "dam_break_impact",
+    "dam_break_wall_sensors",
+    "DAM_BREAK_WALL_SENSORS",
     "QuinticSpline",
 ]
