@@ -18,12 +18,19 @@ The loop accepts any optax optimiser (``optax.adam(0.05)``, ``optax.lbfgs()``, a
     )
     result.values["kinematic_viscosity"], result.history["loss"]
 
-The loss and its gradient are compiled once.  ``mode="reverse"`` takes the gradient with
-``jax.value_and_grad`` (one forward and one reverse pass, whatever the number of fitted
-fields); ``mode="forward"`` with one forward-mode tangent per fitted field (``jax.jvp``,
-vmapped): nothing is stored along the simulation and, for one or two fields, it is the
-cheaper of the two (``docs/performance_gradients.md``).  ``"auto"`` (the default) picks
-forward mode for at most two fields.
+The loss and its gradient are compiled once, and so is the optimiser's update; the
+observations are an argument of both programs, not a constant in them, so a second fit to
+other data (another noise draw) finds them in the persistent compilation cache.
+``mode="reverse"`` takes the gradient with ``jax.value_and_grad`` (one forward and one
+reverse pass, whatever the number of fitted fields); ``mode="forward"`` with one
+forward-mode tangent per fitted field (``jax.jvp``, vmapped): nothing is stored along the
+simulation and, for one or two fields, it is the cheaper of the two
+(``docs/performance_gradients.md``).  ``"auto"`` (the default) picks forward mode for at
+most two fields.  The mode holds for every gradient of the fit: an optimiser with a line
+search (``optax.lbfgs()``) differentiates the loss it is given, whose reverse-mode
+derivative is then the forward-mode one (:func:`with_forward_mode_gradient`), and the
+loss and gradient the line search leaves in its state are used for the next iteration
+instead of being computed again.
 """
 
 from __future__ import annotations
@@ -110,6 +117,46 @@ def forward_value_and_grad(fn):
     return value_and_grad
 
 
+def with_forward_mode_gradient(fn):
+    """``fn(theta, data) -> scalar`` whose reverse-mode derivative in ``theta`` is taken
+    by forward mode (:func:`forward_value_and_grad`, one tangent per entry) and kept as
+    the residual: ``jax.grad`` of the result, wherever it is called (an optimiser's line
+    search included), runs no reverse pass through the simulation.  First derivatives
+    only; ``data`` (the observations) gets no gradient."""
+
+    @jax.custom_vjp
+    def wrapped(theta, data):
+        return fn(theta, data)
+
+    def value_and_residual(theta, data):
+        value, grad = forward_value_and_grad(lambda t: fn(t, data))(theta)
+        return value, (grad, data)
+
+    def pullback(residual, cotangent):
+        grad, data = residual
+        return jax.tree.map(lambda g: cotangent * g, grad), jax.tree.map(jnp.zeros_like, data)
+
+    wrapped.defvjp(value_and_residual, pullback)
+    return wrapped
+
+
+def _strongly_typed(tree):
+    """The same pytree with no weakly typed leaves.  Optimiser states start with weakly
+    typed scalars (``optax.lbfgs``' line-search counters) that come back strongly typed
+    from the first update: without this the jitted update is compiled a second time."""
+    return jax.tree.map(lambda x: jnp.asarray(x, dtype=jnp.result_type(x)), tree)
+
+
+def _stored_value_and_grad(state):
+    """``(value, grad)`` that a line search (``optax.lbfgs``) left in the optimiser state
+    for the parameters it moved to, or ``None`` before its first update / without one."""
+    value = optax.tree_utils.tree_get(state, "value", default=None)
+    grad = optax.tree_utils.tree_get(state, "grad", default=None)
+    if value is None or grad is None or not math.isfinite(float(value)):
+        return None
+    return value, grad
+
+
 def calibrate(
     observables: Callable[[Params], jax.Array],
     observed,
@@ -146,9 +193,10 @@ def calibrate(
       loss_tolerance: stop once the loss is below this.
       step_tolerance: stop once every fitted value changes by less than this
         relative amount in one update.
-      mode: how the gradient is taken: ``"reverse"`` (``jax.value_and_grad``),
-        ``"forward"`` (one ``jax.jvp`` tangent per field) or ``"auto"``: forward for at
-        most two fields, reverse otherwise.
+      mode: how every gradient of the fit is taken (the optimiser's line search
+        included): ``"reverse"`` (``jax.value_and_grad``), ``"forward"`` (one
+        ``jax.jvp`` tangent per field) or ``"auto"``: forward for at most two fields,
+        reverse otherwise.
       verbose: print one line per iteration.
     Returns:
       :class:`CalibrationResult`.
@@ -196,26 +244,32 @@ def calibrate(
     def to_params(theta):
         return base_params.replace(**{n: backward[n](theta[n]) for n in names})
 
-    def loss_fn(theta):
-        return relative_misfit(observables(to_params(theta)), observed, weights)
+    # The observations are an argument of the compiled programs, not a constant in them:
+    # the same fit to other data (another noise draw) reuses the compiled programs.
+    def loss_fn(theta, data):
+        return relative_misfit(observables(to_params(theta)), data, weights)
 
-    differentiate = forward_value_and_grad if mode == "forward" else jax.value_and_grad
-    value_and_grad = jax.jit(differentiate(loss_fn))
+    if mode == "forward":
+        loss_fn = with_forward_mode_gradient(loss_fn)
+    value_and_grad = jax.jit(jax.value_and_grad(loss_fn))
     if isinstance(optimizer, optax.GradientTransformationExtraArgs):
 
         @jax.jit
-        def update(grad, state, theta, value):
-            return optimizer.update(grad, state, theta, value=value, grad=grad, value_fn=loss_fn)
+        def update(grad, state, theta, value, data):
+            return optimizer.update(
+                grad, state, theta, value=value, grad=grad, value_fn=lambda t: loss_fn(t, data)
+            )
 
     else:
 
         @jax.jit
-        def update(grad, state, theta, value):
-            del value
+        def update(grad, state, theta, value, data):
+            del value, data
             return optimizer.update(grad, state, theta)
 
+    observed = jax.tree.map(lambda o: jnp.asarray(o, dtype), observed)
     theta = {n: forward[n](jnp.asarray(initial[n], dtype)) for n in names}
-    state = optimizer.init(theta)
+    state = _strongly_typed(optimizer.init(theta))
     history: dict[str, list[float]] = {"loss": [], "grad_norm": []}
     history.update({n: [] for n in names})
 
@@ -224,7 +278,8 @@ def calibrate(
 
     iterations = 0
     for iteration in range(n_iterations):
-        value, grad = value_and_grad(theta)
+        # a line search has already evaluated the loss and its gradient where it moved to
+        value, grad = _stored_value_and_grad(state) or value_and_grad(theta, observed)
         values = current(theta)
         grad_norm = float(optax.global_norm(grad))
         if not math.isfinite(float(value)) or not math.isfinite(grad_norm):
@@ -244,7 +299,7 @@ def calibrate(
             )
         if loss_tolerance is not None and float(value) < loss_tolerance:
             break
-        updates, state = update(grad, state, theta, value)
+        updates, state = update(grad, state, theta, value, observed)
         theta = optax.apply_updates(theta, updates)
         iterations += 1
         if step_tolerance is not None:
@@ -262,4 +317,10 @@ def calibrate(
     )
 
 
-__all__ = ["CalibrationResult", "calibrate", "forward_value_and_grad", "relative_misfit"]
+__all__ = [
+    "CalibrationResult",
+    "calibrate",
+    "forward_value_and_grad",
+    "relative_misfit",
+    "with_forward_mode_gradient",
+]

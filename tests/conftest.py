@@ -44,6 +44,7 @@ COSTLIEST_FIRST = (
     "test_rigid.py",  # ~150 (93 s here; 194 s before its runs were compiled whole)
     "test_diffrax.py",  # ~150 (84 s here)
     "test_solver_in_the_loop.py",  # ~115
+    "test_calibrate.py",  # ~110 (the gate's two-parameter fit ~50 s here)
     "test_dam_break_impact.py",  # ~100 (23 s here; 38 s before)
 )
 

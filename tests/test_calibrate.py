@@ -86,6 +86,73 @@ def test_calibrate_rejects_unknown_mode():
         )
 
 
+def _decay_by_while_loop(params):
+    """``_decay_model`` with the decay factor ``r = exp(-nu)`` found by Newton's method in a
+    ``while_loop``: forward-mode differentiable, but reverse mode refuses it."""
+    nu = params.kinematic_viscosity
+
+    def newton(state):
+        r, k = state
+        return r * (1.0 - jnp.log(r) - nu), k + 1
+
+    def unconverged(state):
+        r, k = state
+        return (jnp.abs(jnp.log(r) + nu) > 1e-14) & (k < 50)
+
+    r, _ = jax.lax.while_loop(unconverged, newton, (jnp.ones_like(nu), 0))
+    return r ** jnp.linspace(0.0, 1.0, 20) * params.sound_speed
+
+
+def test_a_line_search_takes_its_gradients_in_forward_mode_when_asked():
+    """``mode="forward"`` holds for every gradient of the fit, ``optax.lbfgs``' line
+    search included (its ``jax.value_and_grad`` gets the forward-mode gradient): a model
+    that reverse mode refuses is fitted."""
+    base = make_params(2, kinematic_viscosity=1.0, sound_speed=1.0)
+    truth = base.replace(kinematic_viscosity=0.3, sound_speed=2.0)
+    observed = _decay_by_while_loop(truth)
+    with pytest.raises(ValueError, match="[Rr]everse-mode"):
+        jax.grad(lambda nu: _decay_by_while_loop(base.replace(kinematic_viscosity=nu))[5])(1.0)
+    start = {"kinematic_viscosity": 0.5, "sound_speed": 1.0}
+    result = calibrate(
+        _decay_by_while_loop,
+        observed,
+        base,
+        start,
+        optax.lbfgs(),
+        40,
+        loss_tolerance=1e-20,
+        mode="forward",
+        verbose=False,
+    )
+    assert result.values["kinematic_viscosity"] == pytest.approx(0.3, rel=1e-6)
+    assert result.values["sound_speed"] == pytest.approx(2.0, rel=1e-6)
+
+
+def test_the_optimisers_update_is_compiled_once():
+    """One trace of the optimiser's update for the whole fit: ``optax.lbfgs``' state starts
+    with weakly typed counters that come back strongly typed, and without care the update
+    (the line search through the model) compiles a second time at the second iteration.
+    The model is traced as often for a fit of 8 updates as for one."""
+    traced = []
+
+    def model(params):
+        traced.append(1)  # runs once per trace, not per evaluation
+        return _decay_model(params)
+
+    base = make_params(2, kinematic_viscosity=1.0, sound_speed=1.0)
+    observed = _decay_model(base.replace(kinematic_viscosity=2.0, sound_speed=3.0))
+    start = {"kinematic_viscosity": 0.7, "sound_speed": 1.2}
+    counts = []
+    for n_iterations in (1, 8):
+        traced.clear()
+        result = calibrate(
+            model, observed, base, start, optax.lbfgs(), n_iterations, mode="reverse", verbose=False
+        )
+        assert result.iterations == n_iterations
+        counts.append(len(traced))
+    assert counts[0] == counts[1], counts
+
+
 def test_forward_mode_gradient_equals_reverse_mode_through_a_simulation():
     """The forward-mode (vmapped jvp) value and gradient used by ``calibrate(mode=...)``
     equal ``jax.value_and_grad`` through 40 steps of a Taylor-Green vortex (float64;
