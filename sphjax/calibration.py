@@ -45,6 +45,7 @@ import optax
 from jax.flatten_util import ravel_pytree
 
 from sphjax.core.params import Params
+from sphjax.integration.simulate import failures_as_nan
 
 TRANSFORMS = {
     "log": (jnp.log, jnp.exp),
@@ -278,11 +279,17 @@ def calibrate(
 
     iterations = 0
     for iteration in range(n_iterations):
-        # a line search has already evaluated the loss and its gradient where it moved to
-        value, grad = _stored_value_and_grad(state) or value_and_grad(theta, observed)
+        # a line search has already evaluated the loss and its gradient where it moved to;
+        # the programs are traced with the runs' failures as NaN (no host callbacks), so
+        # that the persistent compilation cache keeps them
+        with failures_as_nan():
+            value, grad = _stored_value_and_grad(state) or value_and_grad(theta, observed)
         values = current(theta)
         grad_norm = float(optax.global_norm(grad))
         if not math.isfinite(float(value)) or not math.isfinite(grad_norm):
+            # run the model concretely: a failed simulation raises its SimulationError or
+            # NeighborOverflowError, which says where and when
+            observables(to_params(theta))
             raise FloatingPointError(
                 f"calibration iteration {iteration}: loss {float(value)} / gradient norm "
                 f"{grad_norm} is not finite at {values}; lower the learning rate or start "
@@ -299,7 +306,8 @@ def calibrate(
             )
         if loss_tolerance is not None and float(value) < loss_tolerance:
             break
-        updates, state = update(grad, state, theta, value, observed)
+        with failures_as_nan():
+            updates, state = update(grad, state, theta, value, observed)
         theta = optax.apply_updates(theta, updates)
         iterations += 1
         if step_tolerance is not None:

@@ -153,6 +153,30 @@ def test_the_optimisers_update_is_compiled_once():
     assert counts[0] == counts[1], counts
 
 
+def test_a_failed_simulation_inside_a_fit_names_its_step_and_particle(monkeypatch):
+    """The fit's programs report a failed run as NaN (no host callback, so they can be
+    cached); a non-finite loss is then re-run concretely, which raises the
+    SimulationError that says where and when, not a bare FloatingPointError."""
+    case = sphjax.cases.get("dam_break", n=4)
+    # a step 30 times too large, let through the step check: the run blows up
+    monkeypatch.setattr(sphjax.integration.simulate, "check_time_step", lambda *args: None)
+
+    def observables(params):
+        return sphjax.simulate(case, params, dt=30 * case.dt, n_steps=40).final.position
+
+    observed = case.state.position
+    with pytest.raises(sphjax.SimulationError, match=r"unstable at step \d+ .* particle \d+"):
+        calibrate(
+            observables,
+            observed,
+            case.params,
+            {"artificial_alpha": 0.05},
+            optax.lbfgs(),
+            3,
+            verbose=False,
+        )
+
+
 def test_forward_mode_gradient_equals_reverse_mode_through_a_simulation():
     """The forward-mode (vmapped jvp) value and gradient used by ``calibrate(mode=...)``
     equal ``jax.value_and_grad`` through 40 steps of a Taylor-Green vortex (float64;

@@ -218,6 +218,30 @@ def test_an_unstable_run_under_grad_without_jit_raises_the_simulation_error(monk
     )
 
 
+def test_failures_as_nan_reports_an_unstable_traced_run_without_a_host_callback():
+    """Inside ``failures_as_nan()`` the run above returns NaN instead of raising, and its
+    program holds no host callback (JAX writes no program with one to the persistent
+    compilation cache); outside, the same loss's program has the callbacks."""
+    from sphjax.integration.simulate import failures_as_nan
+
+    case = sphjax.cases.get("dam_break", n=4)
+
+    def loss(alpha, dt):
+        params = case.params.replace(artificial_alpha=alpha)
+        final = sphjax.simulate(case, params, dt=dt, n_steps=40).final
+        return final.position.sum()
+
+    alpha = case.params.artificial_alpha
+    with failures_as_nan():
+        value, grad = jax.jit(jax.value_and_grad(loss))(alpha, 30 * case.dt)
+        fine = jax.jit(loss)(alpha, case.dt)
+        quiet = jax.jit(jax.value_and_grad(loss)).lower(alpha, case.dt).as_text()
+    assert np.isnan(float(value)) and np.isnan(float(grad))
+    assert np.isfinite(float(fine))
+    loud = jax.jit(jax.value_and_grad(loss)).lower(alpha, case.dt).as_text()
+    assert "callback" in loud and "callback" not in quiet
+
+
 def test_time_step_forced_past_the_check_blows_up(monkeypatch, tmp_path):
     monkeypatch.setattr(sphjax.integration.simulate, "check_time_step", lambda *args: None)
     case = sphjax.cases.get("dam_break", n=4)

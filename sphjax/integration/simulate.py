@@ -385,6 +385,45 @@ def _failure_reason(state: State, model: Model, row: int) -> str:
 #: the runtime's wrapper around it (the checks run on the runtime's callback thread)
 _raised = types.SimpleNamespace(error=None)
 
+# How a traced run reports a neighbour overflow or an unstable step: "raise" (a host
+# callback raises NeighborOverflowError / SimulationError from inside the program) or
+# "nan" (its frames' floating-point fields come back NaN; see failures_as_nan).
+_traced_failures = types.SimpleNamespace(mode="raise")
+
+
+@contextlib.contextmanager
+def failures_as_nan():
+    """Inside this block a traced run (under ``jit``/``grad``/``vmap``) that overflows its
+    neighbour lists or goes unstable returns NaN in every floating-point field of its
+    frames instead of raising from a host callback; runs traced elsewhere still raise.
+
+    JAX never writes a program that holds a host callback to its persistent compilation
+    cache, so with the callbacks every gradient of a simulation is compiled anew in every
+    process; a program traced inside this block has none and is cached like any other.
+    The price is the message: a NaN says that the run failed, not where.  Read it from the
+    same run outside the block (:func:`sphjax.calibrate` does: a non-finite loss is
+    re-run concretely, which raises the SimulationError or NeighborOverflowError that
+    names the step and particle).  A function traced inside the block keeps its NaN
+    reporting when a ``jit`` cache later calls it outside."""
+    previous, _traced_failures.mode = _traced_failures.mode, "nan"
+    try:
+        yield
+    finally:
+        _traced_failures.mode = previous
+
+
+def _nan_where(failed, frames: State) -> State:
+    """``frames`` with every floating-point field NaN where ``failed``, and so every
+    derivative of them (a product with NaN, not a ``where``, whose derivative would be 0);
+    exact where not (a product with 1)."""
+
+    def poison(x):
+        if not jnp.issubdtype(x.dtype, jnp.inexact):
+            return x
+        return x * jnp.where(failed, jnp.asarray(jnp.nan, x.dtype), jnp.asarray(1, x.dtype))
+
+    return jax.tree_util.tree_map(poison, frames)
+
 
 def _raising_what_the_run_raised(run, *args):
     """``run(*args)`` (the compiled traced run); if it executes now and one of its checks
@@ -545,6 +584,7 @@ def simulate(
             checkpoint_every=checkpoint_every,
             order=order,
             max_stored=MAX_STORED_CHUNKS,
+            failures=_traced_failures.mode,
         )
     else:
         run = functools.partial(
@@ -578,16 +618,28 @@ def _initial_carry(state, neighbors):
     return state, neighbors, np.full(2, -1, np.int32), np.zeros((), np.int32)
 
 
-@functools.partial(jax.jit, static_argnames=("model", "segments", "checkpoint_every", "max_stored"))
+@functools.partial(
+    jax.jit, static_argnames=("model", "segments", "checkpoint_every", "max_stored", "failures")
+)
 def _simulate_compiled(
-    state, neighbors, dt, params, model, *, segments, checkpoint_every, order, max_stored
+    state,
+    neighbors,
+    dt,
+    params,
+    model,
+    *,
+    segments,
+    checkpoint_every,
+    order,
+    max_stored,
+    failures="raise",
 ):
     """:func:`_simulate_traced` as one program.  Under an outer transformation without a
     ``jit`` (``jax.grad(loss)(p)``) the run would otherwise be differentiated and executed
     operation by operation, about twice as slow (under an outer ``jit`` it is not used).
     ``order`` (an array, or ``None``) maps the run's particles to the user's for error
     messages; ``max_stored`` is :data:`MAX_STORED_CHUNKS` when called, read by the trace,
-    a part of the cache key."""
+    a part of the cache key; ``failures``: ``"raise"`` or ``"nan"`` (:func:`failures_as_nan`)."""
     del max_stored
     return _simulate_traced(
         state,
@@ -598,6 +650,7 @@ def _simulate_compiled(
         segments=segments,
         checkpoint_every=checkpoint_every,
         order=order,
+        failures=failures,
     )
 
 
@@ -627,7 +680,9 @@ def _rebuilt_as_zeros(neighbors: Neighbors) -> Neighbors:
     return rest if fixed is None else _join_fixed(rest, fixed)
 
 
-def _simulate_traced(state, neighbors, dt, params, model, *, segments, checkpoint_every, order):
+def _simulate_traced(
+    state, neighbors, dt, params, model, *, segments, checkpoint_every, order, failures="raise"
+):
     """One ``lax.scan`` per segment of equal frames (under grad/jit/vmap); overflow and
     instability are raised from inside the computation.  Returns the frames, the initial
     one first.
@@ -655,6 +710,8 @@ def _simulate_traced(state, neighbors, dt, params, model, *, segments, checkpoin
             fixed=fixed,
         )
         all_frames.append(frames)
+    if failures == "nan":
+        return _nan_where(overflowed(carry[1]) | (carry[2][0] >= 0), _stack(all_frames))
     jax.debug.callback(_raise_overflow, overflowed(carry[1]))
     jax.debug.callback(_raise_failure, carry[2], dt, order)
     return _stack(all_frames)
