@@ -2,7 +2,8 @@
 Taylor-Green run corrected towards a 16x16 one.  Cost: 58 s of CPU time, nearly all
 compilation (the fine reference, two rollouts, one training step); 3.5 min wall clock
 measured on the shared, loaded 2-core machine; the test of the loss relative to the coarse
-solver adds 17 s wall (alone on the machine).
+solver adds 17 s wall (alone on the machine); the start-up term, truncation and refusals
+tests 55 s wall.
 """
 
 from __future__ import annotations
@@ -164,3 +165,84 @@ def test_a_non_finite_gradient_stops_training_with_its_iteration(problem):
     net = sil.Corrector(problem, jax.random.PRNGKey(0))
     with pytest.raises(FloatingPointError, match="not finite at iteration 1"):
         sil.train(poisoned, net, unroll=1, iterations=3, log=lambda s: None)
+
+
+def test_the_startup_term_by_hand(problem):
+    """``startup_steps=m, startup_weight=w`` adds ``(w / m) sum_{k <= m} q_k`` to the
+    window's ``mean_k q_k``, ``q_k = e_k^2 / (e^c_k)^2``: 1 + w for the untrained (zero)
+    correction, the coarse solver; after eight updates (the schedule then stops them) the
+    recorded loss equals the value computed by hand from :func:`errors` for the returned
+    network, and is lower than the untrained one."""
+    import optax
+
+    net = sil.Corrector(problem, jax.random.PRNGKey(0))
+    coarse = sil.errors(problem, None)[0, 1:]
+    schedule = optax.piecewise_constant_schedule(1e-2, {8: 0.0})
+    result = sil.train(
+        problem,
+        net,
+        unroll=4,
+        iterations=10,
+        lr=schedule,
+        loss="relative_to_coarse",
+        startup_steps=2,
+        startup_weight=0.5,
+        log=lambda s: None,
+    )
+    losses = np.asarray(result.losses)
+    assert losses[0] == pytest.approx(1.5, rel=1e-6)
+    q = sil.errors(problem, result.net)[0, 1:] ** 2 / coarse**2
+    by_hand = np.mean(q) + 0.5 * np.mean(q[:2])
+    assert losses[9] == pytest.approx(by_hand, rel=1e-6)
+    assert by_hand < 0.9 * 1.5
+
+
+def test_truncated_backpropagation_cuts_the_gradient_every_k_steps(problem):
+    """``rollout(truncate=2)``: the same values; the gradient of the field at step 4 is
+    that of a two-step rollout from the state after step 2 (held fixed), and differs from
+    the untruncated one, while that of step 2 (no cut before it) is the untruncated one."""
+    import equinox as eqx
+
+    net = sil.Corrector(problem, jax.random.PRNGKey(0))
+    last = net.gns.decoder.weights[-1]
+    net = eqx.tree_at(lambda n: n.gns.decoder.weights[-1], net, last + 0.1)
+    pc = problem.conditions[0][0]
+    state, nbrs = problem.coarse.state, sil.allocate(problem)
+    weight = jax.random.normal(jax.random.PRNGKey(1), problem.probes.shape)
+
+    def field(net, start, n_steps, k, truncate):
+        _, fields, _ = sil.rollout(problem, net, "correction", start, pc, n_steps, nbrs, truncate)
+        return (fields[k - 1] * weight).sum()
+
+    def grad(*args):
+        g = eqx.filter_grad(field)(net, *args)
+        return np.concatenate([np.ravel(a) for a in jax.tree_util.tree_leaves(g)])
+
+    full = sil.rollout(problem, net, "correction", state, pc, 4, nbrs)
+    cut = sil.rollout(problem, net, "correction", state, pc, 4, nbrs, truncate=2)
+    np.testing.assert_array_equal(np.asarray(full[1]), np.asarray(cut[1]))
+    after2 = jax.tree_util.tree_map(lambda a: a[1], full[0])
+    g_cut, g_full = grad(state, 4, 4, 2), grad(state, 4, 4, None)
+    g_restart = grad(after2, 2, 2, None)
+    scale = np.abs(g_restart).max()
+    np.testing.assert_allclose(g_cut, g_restart, atol=1e-4 * scale)
+    assert np.abs(g_full - g_cut).max() > 1e-2 * scale
+    np.testing.assert_allclose(grad(state, 4, 2, 2), grad(state, 4, 2, None), atol=1e-6 * scale)
+
+
+def test_meaningless_startup_and_truncation_arguments_are_refused(problem):
+    net = sil.Corrector(problem, jax.random.PRNGKey(0))
+    cases = [
+        (dict(startup_weight=1.0), "startup_weight has no effect without startup_steps"),
+        (dict(startup_steps=4), r"startup_steps must lie in 1..3"),
+        (dict(startup_steps=0), r"startup_steps must lie in 1..3"),
+        (dict(startup_steps=1.5), "startup_steps must be an integer"),
+        (dict(startup_steps=2, startup_weight=0.0), "startup_weight must be positive"),
+        (dict(startup_steps=2, startup_weight=-1.0), "startup_weight must be positive"),
+        (dict(truncate=4), r"truncate must be an integer in 1..3"),
+        (dict(truncate=0), r"truncate must be an integer in 1..3"),
+    ]
+    for kwargs, message in cases:
+        with pytest.raises(ValueError, match=message) as info:
+            sil.train(problem, net, unroll=4, iterations=1, log=lambda s: None, **kwargs)
+        assert "\n" not in str(info.value)

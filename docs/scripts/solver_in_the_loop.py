@@ -104,6 +104,27 @@ def main(argv=None) -> dict:
         help="relative: mean squared relative error over the window; relative_to_coarse: "
         "each step's divided by the coarse solver's own (train(loss=...))",
     )
+    p.add_argument(
+        "--startup-steps",
+        type=int,
+        default=None,
+        help="M: add the mean of the same per-step loss over the first M steps "
+        "(train(startup_steps=M))",
+    )
+    p.add_argument(
+        "--startup-weight",
+        type=float,
+        default=None,
+        help="weight of that start-up term (default 1: the first M steps count as much "
+        "as the whole window; train(startup_weight=...))",
+    )
+    p.add_argument(
+        "--truncate",
+        type=int,
+        default=None,
+        help="K: truncated back-propagation, the state cut from the gradient every K "
+        "steps of the window (train(truncate=K))",
+    )
     p.add_argument("--lr", type=float, default=1e-3)
     p.add_argument(
         "--iterations",
@@ -216,6 +237,9 @@ def main(argv=None) -> dict:
             iterations=args.iterations,
             lr=lr,
             loss=args.loss,
+            startup_steps=args.startup_steps,
+            startup_weight=args.startup_weight,
+            truncate=args.truncate,
             seed=previous["iterations"],  # a resumed piece draws new windows
         )
         record = dict(

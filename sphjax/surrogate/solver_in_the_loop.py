@@ -341,21 +341,36 @@ def step(problem: Problem, net, mode: str, state: State, params: Params, graph, 
 
 
 def rollout(
-    problem: Problem, net, mode: str, state: State, params: Params, n_steps: int, neighbors
+    problem: Problem,
+    net,
+    mode: str,
+    state: State,
+    params: Params,
+    n_steps: int,
+    neighbors,
+    truncate: int | None = None,
 ):
     """``n_steps`` coarse steps from ``state``: ``(states [n_steps], probe fields
-    [n_steps, P, d], overflow)``."""
+    [n_steps, P, d], overflow)``.
+
+    ``truncate=K``: the state is cut from the gradient (``jax.lax.stop_gradient``) after
+    every ``K`` steps, so the derivative of the probe field at step ``k`` reaches the
+    network only through the steps since the last cut (``k - K floor((k - 1) / K)``
+    of them, 1..K); the values are unchanged."""
     graph = _graph(problem)
     probes = jnp.asarray(problem.probes, state.position.dtype)
 
-    def body(carry, _):
+    def body(carry, i):
         s, nbrs, over = carry
+        if truncate is not None:
+            cut = (i % truncate == 0) & (i > 0)
+            s = jax.tree_util.tree_map(lambda a: jnp.where(cut, jax.lax.stop_gradient(a), a), s)
         s, nbrs = step(problem, net, mode, s, params, graph, nbrs)
         u = probe_velocity(s, problem.coarse, probes)
         return (s, nbrs, over | overflowed(nbrs)), (s, u)
 
     (_, _, over), (states, fields) = jax.lax.scan(
-        body, (state, neighbors, jnp.asarray(False)), None, length=n_steps
+        body, (state, neighbors, jnp.asarray(False)), jnp.arange(n_steps)
     )
     return states, fields, over
 
@@ -432,6 +447,9 @@ def train(
     refresh_every: int = 25,
     seed: int = 0,
     loss: str = "relative",
+    startup_steps: int | None = None,
+    startup_weight: float | None = None,
+    truncate: int | None = None,
     log=print,
 ) -> TrainResult:
     """Train ``net`` by back-propagating through ``unroll`` coarse steps (solver included).
@@ -451,6 +469,22 @@ def train(
       a fraction of the coarse error at each step).  The untrained (zero) correction
       gives 1 on a window from step 0.
 
+    ``startup_steps=m`` (with ``startup_weight=w``, default 1) adds to either loss the
+    mean over the first ``m`` steps of the same per-step term ``q_k`` (``e_k^2`` or
+    ``e_k^2 / (e^c_k)^2``), weighted by ``w``:
+
+        L = mean_{k in window} q_k  +  (w / m) sum_{k in window, k <= m} q_k
+
+    With ``unroll`` equal to the horizon (one window from step 0) that is ``mean_{k=1..H}
+    q_k + w mean_{k=1..m} q_k``: both terms from the same rollout, at no extra cost, and
+    with ``w = 1`` the first ``m`` steps count as much in total as the whole window.  A
+    window that starts after step ``m`` has no start-up term.
+
+    ``truncate=K``: truncated back-propagation through the window's rollout (see
+    :func:`rollout`): a step's loss trains the network only through the last (at most
+    ``K``) steps before it, not through the whole window; the loss values are those of the
+    full rollout.
+
     Adam with gradients clipped to global norm ``clip``; ``lr`` is a number or
     an optax schedule of the iteration (e.g. ``optax.exponential_decay``, so the steps
     shrink as the correction settles).  Budget:
@@ -467,6 +501,32 @@ def train(
         raise ValueError(
             f"unroll must lie in 1..{problem.horizon} (the reference horizon), got {unroll}"
         )
+    if startup_weight is not None and startup_steps is None:
+        raise ValueError(
+            "startup_weight has no effect without startup_steps; give startup_steps=m "
+            "(the first m steps of the rollout) or leave startup_weight out"
+        )
+    if startup_steps is not None:
+        if isinstance(startup_steps, bool) or int(startup_steps) != startup_steps:
+            raise ValueError(f"startup_steps must be an integer, got {startup_steps!r}")
+        if not 1 <= startup_steps < problem.horizon:
+            raise ValueError(
+                f"startup_steps must lie in 1..{problem.horizon - 1} (fewer than the horizon; "
+                f"all {problem.horizon} steps would only rescale the loss), got {startup_steps}"
+            )
+        startup_weight = 1.0 if startup_weight is None else float(startup_weight)
+        if not startup_weight > 0:
+            raise ValueError(
+                f"startup_weight must be positive (0 adds nothing; leave startup_steps out), "
+                f"got {startup_weight}"
+            )
+    if truncate is not None and (
+        isinstance(truncate, bool) or int(truncate) != truncate or not 1 <= truncate < unroll
+    ):
+        raise ValueError(
+            f"truncate must be an integer in 1..{unroll - 1} (steps back-propagated, fewer "
+            f"than unroll; leave it out for the whole window), got {truncate!r}"
+        )
     neighbors = allocate(problem)
     n_starts = problem.horizon // unroll
     reference = jnp.asarray(problem.reference)
@@ -476,19 +536,30 @@ def train(
     else:
         weights = np.ones(problem.reference.shape[:2])
     weights = jnp.asarray(weights, reference.dtype)
+    # per step 0..horizon, the start-up term's factor: w / m on steps 1..m, else 0
+    startup = np.zeros(problem.horizon + 1)
+    if startup_steps is not None:
+        startup[1 : startup_steps + 1] = startup_weight / startup_steps
+    startup = jnp.asarray(startup, reference.dtype)
 
-    def loss_fn(net, state, params, ref, weight):
-        _, fields, over = rollout(problem, net, mode, state, params, unroll, neighbors)
-        return jnp.mean(weight * relative_error(fields, ref) ** 2), over
+    def loss_fn(net, state, params, ref, weight, extra):
+        _, fields, over = rollout(
+            problem, net, mode, state, params, unroll, neighbors, truncate=truncate
+        )
+        q = weight * relative_error(fields, ref) ** 2
+        value = jnp.mean(q)
+        if startup_steps is not None:
+            value = value + jnp.sum(extra * q)
+        return value, over
 
     # clipped gradients: an unrolled solver has occasional large gradients
     optimizer = optax.chain(optax.clip_by_global_norm(clip), optax.adam(lr))
     opt_state = optimizer.init(eqx.filter(net, eqx.is_array))
 
     @eqx.filter_jit
-    def update(net, opt_state, state, params, ref, weight):
+    def update(net, opt_state, state, params, ref, weight, extra):
         (loss, over), grads = eqx.filter_value_and_grad(loss_fn, has_aux=True)(
-            net, state, params, ref, weight
+            net, state, params, ref, weight, extra
         )
         leaves = jax.tree_util.tree_leaves(eqx.filter(grads, eqx.is_array))
         finite = jnp.all(jnp.stack([jnp.all(jnp.isfinite(g)) for g in leaves]))
@@ -533,6 +604,7 @@ def train(
             problem.conditions[c][0],
             reference[c, window],
             weights[c, window],
+            startup[window],
         )
         if bool(over):
             raise RuntimeError("the correction's neighbour list overflowed; raise its capacity")
