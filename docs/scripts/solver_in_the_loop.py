@@ -125,6 +125,13 @@ def main(argv=None) -> dict:
         help="K: truncated back-propagation, the state cut from the gradient every K "
         "steps of the window (train(truncate=K))",
     )
+    p.add_argument(
+        "--power",
+        type=float,
+        default=2.0,
+        help="p: the loss is the 2/p power of the mean p-th power of the per-step ratio "
+        "(2: the mean square; larger: nearer the worst step; train(power=p))",
+    )
     p.add_argument("--lr", type=float, default=1e-3)
     p.add_argument(
         "--iterations",
@@ -240,6 +247,7 @@ def main(argv=None) -> dict:
             startup_steps=args.startup_steps,
             startup_weight=args.startup_weight,
             truncate=args.truncate,
+            power=args.power,
             seed=previous["iterations"],  # a resumed piece draws new windows
         )
         record = dict(

@@ -28,6 +28,7 @@ same way; the solver alone is ``net=None``.
 from __future__ import annotations
 
 import dataclasses
+import math
 import time
 
 import equinox as eqx
@@ -450,6 +451,7 @@ def train(
     startup_steps: int | None = None,
     startup_weight: float | None = None,
     truncate: int | None = None,
+    power: float = 2.0,
     log=print,
 ) -> TrainResult:
     """Train ``net`` by back-propagating through ``unroll`` coarse steps (solver included).
@@ -479,6 +481,15 @@ def train(
     q_k + w mean_{k=1..m} q_k``: both terms from the same rollout, at no extra cost, and
     with ``w = 1`` the first ``m`` steps count as much in total as the whole window.  A
     window that starts after step ``m`` has no start-up term.
+
+    ``power=p`` (default 2): the per-step term is ``q_k = r_k^p`` with ``r_k = e_k`` (or
+    ``e_k / e^c_k``) and the loss is the ``2/p`` power of the sum above,
+
+        L = ( mean_{k in window} r_k^p  +  (w / m) sum_{k in window, k <= m} r_k^p )^(2/p)
+
+    the same as above at ``p = 2``; as ``p`` grows it tends to the square of the largest
+    ratio in the window (a soft maximum over the steps), so the steps furthest from the
+    target weigh most, whichever they are.
 
     ``truncate=K``: truncated back-propagation through the window's rollout (see
     :func:`rollout`): a step's loss trains the network only through the last (at most
@@ -527,6 +538,12 @@ def train(
             f"truncate must be an integer in 1..{unroll - 1} (steps back-propagated, fewer "
             f"than unroll; leave it out for the whole window), got {truncate!r}"
         )
+    if isinstance(power, bool) or not (math.isfinite(float(power)) and float(power) >= 2):
+        raise ValueError(
+            f"power must be a finite number >= 2 (2: the mean square; larger: nearer the "
+            f"largest step), got {power!r}"
+        )
+    power = float(power)
     neighbors = allocate(problem)
     n_starts = problem.horizon // unroll
     reference = jnp.asarray(problem.reference)
@@ -546,10 +563,12 @@ def train(
         _, fields, over = rollout(
             problem, net, mode, state, params, unroll, neighbors, truncate=truncate
         )
-        q = weight * relative_error(fields, ref) ** 2
+        q = (weight * relative_error(fields, ref) ** 2) ** (power / 2)
         value = jnp.mean(q)
         if startup_steps is not None:
             value = value + jnp.sum(extra * q)
+        if power != 2.0:
+            value = value ** (2 / power)
         return value, over
 
     # clipped gradients: an unrolled solver has occasional large gradients
