@@ -42,7 +42,7 @@ from sphjax.core.case import Case
 from sphjax.core.params import Params
 from sphjax.core.space import covered, minimum_image, safe_norm
 from sphjax.core.state import Kind, State
-from sphjax.integration.simulate import simulate
+from sphjax.integration.simulate import failures_as_nan, simulate
 from sphjax.surrogate.gns import GNS
 from sphjax.surrogate.graph import RadiusGraph, overflowed
 
@@ -602,7 +602,11 @@ def train(
         return out
 
     rng = np.random.default_rng(seed)
-    starts = refresh(net)
+    # the training programs are traced with the solver's failures reported as NaN (which
+    # the finite-gradient check below stops on), not by host callbacks: JAX writes no
+    # program with a host callback to its persistent compilation cache
+    with failures_as_nan():
+        starts = refresh(net)
     losses = []
     t0, c0 = time.perf_counter(), time.process_time()
     k = 0
@@ -616,22 +620,24 @@ def train(
         j = int(rng.integers(n_starts))
         state = jax.tree_util.tree_map(lambda a, j=j: a[j], starts[c])
         window = slice(j * unroll + 1, (j + 1) * unroll + 1)
-        new_net, new_opt_state, value, over, finite = update(
-            net,
-            opt_state,
-            state,
-            problem.conditions[c][0],
-            reference[c, window],
-            weights[c, window],
-            startup[window],
-        )
+        with failures_as_nan():
+            new_net, new_opt_state, value, over, finite = update(
+                net,
+                opt_state,
+                state,
+                problem.conditions[c][0],
+                reference[c, window],
+                weights[c, window],
+                startup[window],
+            )
         if bool(over):
             raise RuntimeError("the correction's neighbour list overflowed; raise its capacity")
         if not bool(finite):  # Adam would write NaN into every weight
             raise FloatingPointError(
                 f"train: the gradient through the unrolled solver is not finite at iteration "
                 f"{k + 1} (condition {c}, start {j}, loss {float(value):.4g}); stopped before "
-                f"an update that would make every weight NaN: lower lr or unroll, or use float64"
+                f"an update that would make every weight NaN (an unstable coarse step gives "
+                f"NaN too): lower lr or unroll, or use float64"
             )
         net, opt_state = new_net, new_opt_state
         losses.append(float(value))
@@ -639,7 +645,8 @@ def train(
         if k == 1:
             t0, c0 = time.perf_counter(), time.process_time()  # budget: after compiling
         if k % refresh_every == 0:
-            starts = refresh(net)
+            with failures_as_nan():
+                starts = refresh(net)
             mean = np.mean(losses[-refresh_every:])
             log(f"iteration {k:5d}  t={time.perf_counter() - t0:7.1f}s  loss {mean:.4e}")
     return TrainResult(net, losses, time.perf_counter() - t0, k, time.process_time() - c0)
