@@ -3,8 +3,11 @@ compiled programs are kept in a persistent cache shared by the test workers and 
 process they start (CLI runs, notebook kernels), so a program compiled once in a run is
 not compiled again."""
 
+import collections
 import gc
+import json
 import os
+import time
 import warnings
 from pathlib import Path
 
@@ -95,3 +98,61 @@ def compiled_programs_dropped_after_each_file():
             f"(the process limit is {MAP_LIMIT}); something keeps compiled programs alive",
             stacklevel=1,
         )
+
+
+# What the suite spends compiling: each test process adds up the seconds JAX spends
+# tracing functions, lowering them and compiling them with XLA (a read from the persistent
+# cache counts as compiling: it happens in the same call), and the run ends with the sum
+# over the processes beside their wall-clock and CPU time.  Processes the tests start
+# themselves (CLI runs, notebook kernels) are not counted.
+COMPILE_EVENTS = {
+    "/jax/core/compile/jaxpr_trace_duration": "tracing",
+    "/jax/core/compile/jaxpr_to_mlir_module_duration": "lowering",
+    "/jax/core/compile/backend_compile_duration": "compiling",
+}
+_compile_seconds = collections.Counter()
+_started = time.perf_counter()
+_processes = []  # one summary per test process (the workers', or this one's with -n 0)
+
+
+def _count_compile_time(event, duration, **kwargs):
+    if event in COMPILE_EVENTS:
+        _compile_seconds[COMPILE_EVENTS[event]] += duration
+
+
+jax.monitoring.register_event_duration_secs_listener(_count_compile_time)
+
+
+def pytest_sessionfinish(session):
+    summary = {
+        "wall": time.perf_counter() - _started,
+        "cpu": time.process_time(),
+        **_compile_seconds,
+    }
+    if hasattr(session.config, "workeroutput"):  # a pytest-xdist worker
+        session.config.workeroutput["sphjax_compile_time"] = json.dumps(summary)
+    elif not getattr(session.config.option, "numprocesses", None):  # no workers: this one
+        _processes.append(summary)
+
+
+@pytest.hookimpl(optionalhook=True)
+def pytest_testnodedown(node, error):
+    summary = getattr(node, "workeroutput", {}).get("sphjax_compile_time")
+    if summary:
+        _processes.append(json.loads(summary))
+
+
+def pytest_terminal_summary(terminalreporter):
+    def total(key):
+        return sum(process.get(key, 0.0) for process in _processes)
+
+    spent = total("tracing") + total("lowering") + total("compiling")
+    if not _processes or not total("wall"):
+        return
+    terminalreporter.write_line(
+        f"JAX compile time in {len(_processes)} test process(es): {spent:.0f} s of their "
+        f"{total('wall'):.0f} s wall-clock ({100 * spent / total('wall'):.0f} %; "
+        f"tracing {total('tracing'):.0f} s, lowering {total('lowering'):.0f} s, XLA "
+        f"{total('compiling'):.0f} s) and {total('cpu'):.0f} CPU-s; processes started by "
+        f"the tests not counted"
+    )
