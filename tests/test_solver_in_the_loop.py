@@ -3,7 +3,8 @@ Taylor-Green run corrected towards a 16x16 one.  Cost: 58 s of CPU time, nearly 
 compilation (the fine reference, two rollouts, one training step); 3.5 min wall clock
 measured on the shared, loaded 2-core machine; the test of the loss relative to the coarse
 solver adds 17 s wall (alone on the machine); the start-up term, truncation and refusals
-tests 55 s wall.
+tests 55 s wall; the schedule and split-training test 16 s wall (three trainings of at
+most six iterations, its programs compiled once and then read from the compilation cache).
 """
 
 from __future__ import annotations
@@ -49,20 +50,48 @@ def test_zero_initialised_correction_is_the_coarse_solver_and_training_lowers_th
     assert trained[0, -1] < coarse[0, -1]
 
 
-def test_a_learning_rate_schedule_reaches_the_optimiser(problem):
-    """``lr`` may be an optax schedule: one that drops to zero after three iterations
+def test_a_schedule_reaches_the_optimiser_and_a_split_training_equals_a_whole_one(problem):
+    """``lr`` may be an optax schedule: one that drops to zero after four iterations
     leaves the network unchanged from then on (the loss, computed before each update on
-    the one condition and start, repeats exactly), while the first three updates lower it.
+    the one condition and start, repeats exactly), while the first four updates lower it.
+    Three iterations, then three more given the first piece's network and
+    ``opt_state`` (Adam's moments and its step count, the schedule's step), give the
+    parameters and losses of the six in one go: a resumed piece that started a new Adam
+    state would take three steps at the schedule's first rate from new moments instead.
     """
+    import equinox as eqx
     import optax
 
     net = sil.Corrector(problem, jax.random.PRNGKey(0))
-    schedule = optax.piecewise_constant_schedule(1e-2, {3: 0.0})
+    schedule = optax.piecewise_constant_schedule(1e-2, {4: 0.0})
     result = sil.train(problem, net, unroll=4, iterations=6, lr=schedule, log=lambda s: None)
     losses = np.asarray(result.losses)
-    assert losses[3] < losses[0]
-    assert len(set(losses[:4].tolist())) == 4  # the first three updates moved the network
-    np.testing.assert_array_equal(losses[3:], losses[3])  # the later ones did not
+    assert losses[4] < losses[0]
+    assert len(set(losses[:5].tolist())) == 5  # the first four updates moved the network
+    np.testing.assert_array_equal(losses[4:], losses[4])  # the later ones did not
+
+    first = sil.train(problem, net, unroll=4, iterations=3, lr=schedule, log=lambda s: None)
+    assert sil.completed_iterations(first.opt_state) == 3
+    second = sil.train(
+        problem,
+        first.net,
+        unroll=4,
+        iterations=3,
+        lr=schedule,
+        opt_state=first.opt_state,
+        log=lambda s: None,
+    )
+    assert sil.completed_iterations(second.opt_state) == 6
+    np.testing.assert_allclose(first.losses + second.losses, losses, rtol=1e-12)
+    split, whole = (
+        jax.tree_util.tree_leaves(eqx.filter(r.net, eqx.is_array)) for r in (second, result)
+    )
+    for a, b in zip(split, whole, strict=True):
+        np.testing.assert_allclose(np.asarray(a), np.asarray(b), rtol=1e-12, atol=1e-15)
+    # the state of a constant learning rate does not fit a schedule's optimiser
+    constant = sil.optimizer(1e-2).init(eqx.filter(net, eqx.is_array))
+    with pytest.raises(ValueError, match="opt_state does not fit this network and lr"):
+        sil.train(problem, net, unroll=4, iterations=1, lr=schedule, opt_state=constant)
 
 
 def test_the_loss_relative_to_the_coarse_solver_by_hand_and_training_lowers_it(problem):

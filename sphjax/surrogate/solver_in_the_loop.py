@@ -428,11 +428,47 @@ def coarse_weights(problem: Problem) -> np.ndarray:
 
 @dataclasses.dataclass
 class TrainResult:
+    """What :func:`train` returns.
+
+    Attributes:
+      net: the trained network.
+      losses: the loss of every iteration of this call (before its update).
+      seconds, cpu_seconds: wall and process CPU seconds of this call, after compiling.
+      iterations: the iterations of this call.
+      opt_state: the optimiser state after the last update (Adam's moments and its step
+        count, which is the schedule's step): pass it back as ``train(opt_state=...)`` to
+        continue this training.
+    """
+
     net: object
     losses: list
     seconds: float
     iterations: int
     cpu_seconds: float = float("nan")
+    opt_state: object = None
+
+
+def optimizer(lr: float | optax.Schedule = 1e-3, clip: float = 1.0):
+    """The optimiser of :func:`train`: Adam with learning rate (or optax schedule) ``lr``,
+    gradients clipped to global norm ``clip``.  ``optimizer(lr, clip).init(eqx.filter(net,
+    eqx.is_array))`` has the structure of ``TrainResult.opt_state`` (a template to read a
+    saved state into, e.g. with ``eqx.tree_deserialise_leaves``)."""
+    # clipped gradients: an unrolled solver has occasional large gradients
+    return optax.chain(optax.clip_by_global_norm(clip), optax.adam(lr))
+
+
+def completed_iterations(opt_state) -> int:
+    """The updates an optimiser state of :func:`train` has made (Adam's step count)."""
+    counts = [
+        s.count
+        for s in jax.tree_util.tree_leaves(
+            opt_state, is_leaf=lambda s: isinstance(s, optax.ScaleByAdamState)
+        )
+        if isinstance(s, optax.ScaleByAdamState)
+    ]
+    if len(counts) != 1:
+        raise ValueError("opt_state is not an optimiser state of train (one Adam state)")
+    return int(counts[0])
 
 
 def train(
@@ -452,6 +488,7 @@ def train(
     startup_weight: float | None = None,
     truncate: int | None = None,
     power: float = 2.0,
+    opt_state=None,
     log=print,
 ) -> TrainResult:
     """Train ``net`` by back-propagating through ``unroll`` coarse steps (solver included).
@@ -496,11 +533,20 @@ def train(
     ``K``) steps before it, not through the whole window; the loss values are those of the
     full rollout.
 
-    Adam with gradients clipped to global norm ``clip``; ``lr`` is a number or
-    an optax schedule of the iteration (e.g. ``optax.exponential_decay``, so the steps
-    shrink as the correction settles).  Budget:
-    ``iterations`` and/or wall-clock ``seconds`` (after compiling); the result also
-    records the process's CPU seconds over the same span.
+    Adam with gradients clipped to global norm ``clip`` (:func:`optimizer`); ``lr`` is a
+    number or an optax schedule of the iteration (e.g. ``optax.exponential_decay``, so the
+    steps shrink as the correction settles).  Budget of this call: ``iterations`` and/or
+    wall-clock ``seconds`` (after compiling); the result also records the process's CPU
+    seconds over the same span.
+
+    ``opt_state``: continue an earlier training, given its network and its
+    ``TrainResult.opt_state`` (default: a new Adam state).  The state carries Adam's
+    moments and its step count ``n``; the schedule continues from step ``n``, and the
+    windows are drawn by iteration number (``seed`` and the iteration since the first
+    piece) and the start states refreshed at every ``refresh_every``-th of them, so a
+    training split into pieces, each given the network and state of the one before (and
+    the same arguments), equals one uninterrupted training to round-off; only the start
+    states are recomputed at every piece's start (with the network they then have).
     """
     if loss not in LOSSES:
         raise ValueError(f"loss must be one of {', '.join(LOSSES)}, got {loss!r}")
@@ -571,9 +617,17 @@ def train(
             value = value ** (2 / power)
         return value, over
 
-    # clipped gradients: an unrolled solver has occasional large gradients
-    optimizer = optax.chain(optax.clip_by_global_norm(clip), optax.adam(lr))
-    opt_state = optimizer.init(eqx.filter(net, eqx.is_array))
+    adam = optimizer(lr, clip)
+    fresh = adam.init(eqx.filter(net, eqx.is_array))
+    if opt_state is None:
+        opt_state = fresh
+    elif jax.tree_util.tree_structure(opt_state) != jax.tree_util.tree_structure(fresh):
+        raise ValueError(
+            "opt_state does not fit this network and lr (a schedule's state differs from a "
+            "constant learning rate's): pass the TrainResult.opt_state of a training of the "
+            "same network with the same kind of lr"
+        )
+    first = completed_iterations(opt_state)
 
     @eqx.filter_jit
     def update(net, opt_state, state, params, ref, weight, extra):
@@ -582,7 +636,7 @@ def train(
         )
         leaves = jax.tree_util.tree_leaves(eqx.filter(grads, eqx.is_array))
         finite = jnp.all(jnp.stack([jnp.all(jnp.isfinite(g)) for g in leaves]))
-        updates, opt_state = optimizer.update(grads, opt_state, eqx.filter(net, eqx.is_array))
+        updates, opt_state = adam.update(grads, opt_state, eqx.filter(net, eqx.is_array))
         return eqx.apply_updates(net, updates), opt_state, loss, over, finite
 
     @eqx.filter_jit
@@ -601,7 +655,6 @@ def train(
             out.append(jax.tree_util.tree_map(lambda a: a[0 : n_starts * unroll : unroll], allst))
         return out
 
-    rng = np.random.default_rng(seed)
     # the training programs are traced with the solver's failures reported as NaN (which
     # the finite-gradient check below stops on), not by host callbacks: JAX writes no
     # program with a host callback to its persistent compilation cache
@@ -616,6 +669,8 @@ def train(
             seconds is not None and elapsed >= seconds
         ):
             break
+        # the window of iteration first + k, whichever piece of a split training runs it
+        rng = np.random.default_rng((seed, first + k))
         c = int(rng.integers(len(problem.conditions)))
         j = int(rng.integers(n_starts))
         state = jax.tree_util.tree_map(lambda a, j=j: a[j], starts[c])
@@ -635,18 +690,20 @@ def train(
         if not bool(finite):  # Adam would write NaN into every weight
             raise FloatingPointError(
                 f"train: the gradient through the unrolled solver is not finite at iteration "
-                f"{k + 1} (condition {c}, start {j}, loss {float(value):.4g}); stopped before "
-                f"an update that would make every weight NaN (an unstable coarse step gives "
-                f"NaN too): lower lr or unroll, or use float64"
+                f"{first + k + 1} (condition {c}, start {j}, loss {float(value):.4g}); stopped "
+                f"before an update that would make every weight NaN (an unstable coarse step "
+                f"gives NaN too): lower lr or unroll, or use float64"
             )
         net, opt_state = new_net, new_opt_state
         losses.append(float(value))
         k += 1
         if k == 1:
             t0, c0 = time.perf_counter(), time.process_time()  # budget: after compiling
-        if k % refresh_every == 0:
+        if (first + k) % refresh_every == 0:
             with failures_as_nan():
                 starts = refresh(net)
             mean = np.mean(losses[-refresh_every:])
-            log(f"iteration {k:5d}  t={time.perf_counter() - t0:7.1f}s  loss {mean:.4e}")
-    return TrainResult(net, losses, time.perf_counter() - t0, k, time.process_time() - c0)
+            log(f"iteration {first + k:5d}  t={time.perf_counter() - t0:7.1f}s  loss {mean:.4e}")
+    return TrainResult(
+        net, losses, time.perf_counter() - t0, k, time.process_time() - c0, opt_state
+    )
