@@ -151,6 +151,31 @@ def test_the_density_input_reaches_the_network(problem):
             assert net.density is None and change == 0.0
 
 
+def test_the_time_since_the_start_reaches_the_network(problem):
+    """``Corrector(time_scales=(2, 8))``: two more node inputs, ``exp(-k / tau)`` with ``k``
+    the coarse steps since the initial state; with a non-zero decoder, the same state at
+    another step gets another correction, which it does not without them (eager calls)."""
+    import equinox as eqx
+
+    state, graph, nbrs = problem.coarse.state, sil._graph(problem), sil.allocate(problem)
+    for time_scales in ((2, 8), None):
+        net = sil.Corrector(problem, jax.random.PRNGKey(0), time_scales=time_scales)
+        last = net.gns.decoder.weights[-1]
+        net = eqx.tree_at(lambda n: n.gns.decoder.weights[-1], net, last + 0.1)
+        # node inputs: the velocity (2), the clocks (2 or none), the type embedding (8)
+        width = 2 + (2 if time_scales else 0) + 8
+        assert net.gns.node_encoder.weights[0].shape[0] == width
+        a, _ = net(state, graph, nbrs, problem.speed, 1)
+        b, _ = net(state, graph, nbrs, problem.speed, 5)
+        change = float(np.abs(np.asarray(a) - np.asarray(b)).max())
+        if time_scales:
+            assert change > 1e-6 * float(np.abs(np.asarray(a)).max())
+        else:
+            assert change == 0.0
+    with pytest.raises(ValueError, match="time_scales must be positive numbers"):
+        sil.Corrector(problem, jax.random.PRNGKey(0), time_scales=(0.0,))
+
+
 def test_bad_arguments_are_named(problem):
     with pytest.raises(ValueError, match="loss must be one of relative, relative_to_coarse"):
         sil.train(

@@ -103,6 +103,14 @@ def main(argv=None) -> dict:
         help="the network also sees the density deviation (Corrector(density=True))",
     )
     p.add_argument(
+        "--time-scales",
+        type=float,
+        nargs="+",
+        default=None,
+        help="TAU...: the network also sees exp(-k / tau), k the coarse steps since the "
+        "start (Corrector(time_scales=...))",
+    )
+    p.add_argument(
         "--loss",
         choices=list(sil.LOSSES),
         default="relative",
@@ -238,6 +246,7 @@ def main(argv=None) -> dict:
             steps=args.message_passing,
             scale=scale,
             density=args.density_input,
+            time_scales=args.time_scales,
         )
         previous = dict(iterations=0, seconds=0.0, cpu_seconds=0.0, losses=[], pieces=0)
         lr = args.lr

@@ -242,6 +242,8 @@ class Corrector(eqx.Module):
     scale: float = eqx.field(static=True)
     # (rho0, (c0 / U)^2) when the density is an input, else None
     density: tuple | None = eqx.field(static=True)
+    # time constants (coarse steps) of the inputs exp(-k / tau), or None
+    time_scales: tuple | None = eqx.field(static=True)
 
     def __init__(
         self,
@@ -252,6 +254,7 @@ class Corrector(eqx.Module):
         steps=2,
         scale=None,
         density: bool = False,
+        time_scales=None,
     ):
         """``scale``: velocity per unit network output and step (default ``0.01 U`` for
         the correction, ``2 pi U^2 dt`` for the pure network, ``U = problem.speed``).  For a
@@ -263,7 +266,12 @@ class Corrector(eqx.Module):
         U^2`` to first order, eq. 12, with the coarse case's ``rho0`` and ``c0``), which
         carries the acoustic waves that the velocities alone show only after they act.
         ``steps``: message-passing steps (each widens what a particle sees by one
-        neighbour radius)."""
+        neighbour radius).
+
+        ``time_scales=(tau_1, ...)`` (coarse steps): also the inputs ``exp(-k / tau_i)``,
+        ``k`` the coarse steps since the case's initial state, the same on every particle:
+        the time since the start, for a start-up transient whose correction depends on
+        it (and that the velocities do not tell apart from a later state)."""
         if mode not in MODES:
             raise ValueError(f"mode must be one of {', '.join(MODES)}, got {mode!r}")
         if scale is not None and not float(scale) > 0:
@@ -275,7 +283,14 @@ class Corrector(eqx.Module):
             rho0 = float(np.asarray(params.reference_density))
             c0 = float(np.asarray(params.sound_speed))
             self.density = (rho0, (c0 / problem.speed) ** 2)
-        node_in = d + (1 if density else 0)
+        if time_scales is not None:
+            time_scales = tuple(float(t) for t in time_scales)
+            if not time_scales or not all(t > 0 for t in time_scales):
+                raise ValueError(
+                    f"time_scales must be positive numbers of coarse steps, got {time_scales}"
+                )
+        self.time_scales = time_scales
+        node_in = d + (1 if density else 0) + len(time_scales or ())
         gns = GNS(node_in, 2 * d + 1, d, key, latent=latent, hidden=latent, steps=steps)
         # start from "no correction": the zero decoder output (the coarse solver exactly)
         last = gns.decoder.weights[-1]
@@ -287,7 +302,9 @@ class Corrector(eqx.Module):
         default = 0.01 * u if mode == "correction" else 2 * np.pi * u * u * dt
         self.scale = default if scale is None else float(scale)
 
-    def __call__(self, state: State, graph: RadiusGraph, neighbors, speed: float):
+    def __call__(self, state: State, graph: RadiusGraph, neighbors, speed: float, step=0):
+        """The velocity increments and the updated neighbour list; ``step``: the coarse
+        steps since the initial state (read with ``time_scales`` only)."""
         x, v = state.position, state.velocity
         n = x.shape[0]
         neighbors = graph.update(x, neighbors)
@@ -307,6 +324,10 @@ class Corrector(eqx.Module):
             rho0, factor = self.density
             deviation = (state.density / rho0 - 1.0) * factor
             nodes = jnp.concatenate([nodes, deviation[:, None].astype(v.dtype)], -1)
+        if self.time_scales is not None:
+            k = jnp.asarray(step, v.dtype)
+            clock = jnp.exp(-k / jnp.asarray(self.time_scales, v.dtype))
+            nodes = jnp.concatenate([nodes, jnp.broadcast_to(clock, (n, clock.size))], -1)
         out = self.gns(nodes, types, edge, senders, mask)
         return jnp.where(fluid, self.scale * out, 0.0), neighbors
 
@@ -325,18 +346,19 @@ def _wrap(x, case: Case):
     return jnp.where(jnp.asarray(domain.periodic), lo + jnp.mod(x - lo, size), x)
 
 
-def step(problem: Problem, net, mode: str, state: State, params: Params, graph, neighbors):
-    """One coarse step: the solver then the correction (``mode="correction"``), the solver
-    alone (``net=None``), or the network alone (``mode="gns"``)."""
+def step(problem: Problem, net, mode: str, state: State, params: Params, graph, neighbors, k=0):
+    """One coarse step, the ``k``-th since the initial state (``k >= 1``): the solver then
+    the correction (``mode="correction"``), the solver alone (``net=None``), or the network
+    alone (``mode="gns"``)."""
     case = problem.coarse
     if mode == "gns":
-        dv, neighbors = net(state, graph, neighbors, problem.speed)
+        dv, neighbors = net(state, graph, neighbors, problem.speed, k - 1)
         v = state.velocity + dv
         x = _wrap(state.position + problem.dt * v, case)
         return state.replace(position=x, velocity=v), neighbors
     state = simulate(case, params, n_steps=1, dt=problem.dt, state=state).final
     if net is not None:
-        dv, neighbors = net(state, graph, neighbors, problem.speed)
+        dv, neighbors = net(state, graph, neighbors, problem.speed, k)
         state = state.replace(velocity=state.velocity + dv)
     return state, neighbors
 
@@ -350,9 +372,10 @@ def rollout(
     n_steps: int,
     neighbors,
     truncate: int | None = None,
+    start=0,
 ):
-    """``n_steps`` coarse steps from ``state``: ``(states [n_steps], probe fields
-    [n_steps, P, d], overflow)``.
+    """``n_steps`` coarse steps from ``state``, the state after ``start`` steps from the
+    initial one: ``(states [n_steps], probe fields [n_steps, P, d], overflow)``.
 
     ``truncate=K``: the state is cut from the gradient (``jax.lax.stop_gradient``) after
     every ``K`` steps, so the derivative of the probe field at step ``k`` reaches the
@@ -366,7 +389,7 @@ def rollout(
         if truncate is not None:
             cut = (i % truncate == 0) & (i > 0)
             s = jax.tree_util.tree_map(lambda a: jnp.where(cut, jax.lax.stop_gradient(a), a), s)
-        s, nbrs = step(problem, net, mode, s, params, graph, nbrs)
+        s, nbrs = step(problem, net, mode, s, params, graph, nbrs, start + i + 1)
         u = probe_velocity(s, problem.coarse, probes)
         return (s, nbrs, over | overflowed(nbrs)), (s, u)
 
@@ -605,9 +628,9 @@ def train(
         startup[1 : startup_steps + 1] = startup_weight / startup_steps
     startup = jnp.asarray(startup, reference.dtype)
 
-    def loss_fn(net, state, params, ref, weight, extra):
+    def loss_fn(net, state, params, ref, weight, extra, start):
         _, fields, over = rollout(
-            problem, net, mode, state, params, unroll, neighbors, truncate=truncate
+            problem, net, mode, state, params, unroll, neighbors, truncate=truncate, start=start
         )
         q = (weight * relative_error(fields, ref) ** 2) ** (power / 2)
         value = jnp.mean(q)
@@ -630,9 +653,9 @@ def train(
     first = completed_iterations(opt_state)
 
     @eqx.filter_jit
-    def update(net, opt_state, state, params, ref, weight, extra):
+    def update(net, opt_state, state, params, ref, weight, extra, start):
         (loss, over), grads = eqx.filter_value_and_grad(loss_fn, has_aux=True)(
-            net, state, params, ref, weight, extra
+            net, state, params, ref, weight, extra, start
         )
         leaves = jax.tree_util.tree_leaves(eqx.filter(grads, eqx.is_array))
         finite = jnp.all(jnp.stack([jnp.all(jnp.isfinite(g)) for g in leaves]))
@@ -684,6 +707,7 @@ def train(
                 reference[c, window],
                 weights[c, window],
                 startup[window],
+                jnp.asarray(j * unroll),  # traced: one program for every window
             )
         if bool(over):
             raise RuntimeError("the correction's neighbour list overflowed; raise its capacity")
