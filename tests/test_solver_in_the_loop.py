@@ -3,7 +3,8 @@ Taylor-Green run corrected towards a 16x16 one.  Cost: 58 s of CPU time, nearly 
 compilation (the fine reference, two rollouts, one training step); 3.5 min wall clock
 measured on the shared, loaded 2-core machine; the test of the loss relative to the coarse
 solver adds 17 s wall (alone on the machine); the start-up term, truncation and refusals
-tests 55 s wall.
+tests 55 s wall; the schedule and split-training test 16 s wall (three trainings of at
+most six iterations, its programs compiled once and then read from the compilation cache).
 """
 
 from __future__ import annotations
@@ -49,20 +50,48 @@ def test_zero_initialised_correction_is_the_coarse_solver_and_training_lowers_th
     assert trained[0, -1] < coarse[0, -1]
 
 
-def test_a_learning_rate_schedule_reaches_the_optimiser(problem):
-    """``lr`` may be an optax schedule: one that drops to zero after three iterations
+def test_a_schedule_reaches_the_optimiser_and_a_split_training_equals_a_whole_one(problem):
+    """``lr`` may be an optax schedule: one that drops to zero after four iterations
     leaves the network unchanged from then on (the loss, computed before each update on
-    the one condition and start, repeats exactly), while the first three updates lower it.
+    the one condition and start, repeats exactly), while the first four updates lower it.
+    Three iterations, then three more given the first piece's network and
+    ``opt_state`` (Adam's moments and its step count, the schedule's step), give the
+    parameters and losses of the six in one go: a resumed piece that started a new Adam
+    state would take three steps at the schedule's first rate from new moments instead.
     """
+    import equinox as eqx
     import optax
 
     net = sil.Corrector(problem, jax.random.PRNGKey(0))
-    schedule = optax.piecewise_constant_schedule(1e-2, {3: 0.0})
+    schedule = optax.piecewise_constant_schedule(1e-2, {4: 0.0})
     result = sil.train(problem, net, unroll=4, iterations=6, lr=schedule, log=lambda s: None)
     losses = np.asarray(result.losses)
-    assert losses[3] < losses[0]
-    assert len(set(losses[:4].tolist())) == 4  # the first three updates moved the network
-    np.testing.assert_array_equal(losses[3:], losses[3])  # the later ones did not
+    assert losses[4] < losses[0]
+    assert len(set(losses[:5].tolist())) == 5  # the first four updates moved the network
+    np.testing.assert_array_equal(losses[4:], losses[4])  # the later ones did not
+
+    first = sil.train(problem, net, unroll=4, iterations=3, lr=schedule, log=lambda s: None)
+    assert sil.completed_iterations(first.opt_state) == 3
+    second = sil.train(
+        problem,
+        first.net,
+        unroll=4,
+        iterations=3,
+        lr=schedule,
+        opt_state=first.opt_state,
+        log=lambda s: None,
+    )
+    assert sil.completed_iterations(second.opt_state) == 6
+    np.testing.assert_allclose(first.losses + second.losses, losses, rtol=1e-12)
+    split, whole = (
+        jax.tree_util.tree_leaves(eqx.filter(r.net, eqx.is_array)) for r in (second, result)
+    )
+    for a, b in zip(split, whole, strict=True):
+        np.testing.assert_allclose(np.asarray(a), np.asarray(b), rtol=1e-12, atol=1e-15)
+    # the state of a constant learning rate does not fit a schedule's optimiser
+    constant = sil.optimizer(1e-2).init(eqx.filter(net, eqx.is_array))
+    with pytest.raises(ValueError, match="opt_state does not fit this network and lr"):
+        sil.train(problem, net, unroll=4, iterations=1, lr=schedule, opt_state=constant)
 
 
 def test_the_loss_relative_to_the_coarse_solver_by_hand_and_training_lowers_it(problem):
@@ -120,6 +149,31 @@ def test_the_density_input_reaches_the_network(problem):
             assert change > 1e-6 * float(np.abs(np.asarray(a)).max())
         else:
             assert net.density is None and change == 0.0
+
+
+def test_the_time_since_the_start_reaches_the_network(problem):
+    """``Corrector(time_scales=(2, 8))``: two more node inputs, ``exp(-k / tau)`` with ``k``
+    the coarse steps since the initial state; with a non-zero decoder, the same state at
+    another step gets another correction, which it does not without them (eager calls)."""
+    import equinox as eqx
+
+    state, graph, nbrs = problem.coarse.state, sil._graph(problem), sil.allocate(problem)
+    for time_scales in ((2, 8), None):
+        net = sil.Corrector(problem, jax.random.PRNGKey(0), time_scales=time_scales)
+        last = net.gns.decoder.weights[-1]
+        net = eqx.tree_at(lambda n: n.gns.decoder.weights[-1], net, last + 0.1)
+        # node inputs: the velocity (2), the clocks (2 or none), the type embedding (8)
+        width = 2 + (2 if time_scales else 0) + 8
+        assert net.gns.node_encoder.weights[0].shape[0] == width
+        a, _ = net(state, graph, nbrs, problem.speed, 1)
+        b, _ = net(state, graph, nbrs, problem.speed, 5)
+        change = float(np.abs(np.asarray(a) - np.asarray(b)).max())
+        if time_scales:
+            assert change > 1e-6 * float(np.abs(np.asarray(a)).max())
+        else:
+            assert change == 0.0
+    with pytest.raises(ValueError, match="time_scales must be positive numbers"):
+        sil.Corrector(problem, jax.random.PRNGKey(0), time_scales=(0.0,))
 
 
 def test_bad_arguments_are_named(problem):

@@ -15,9 +15,14 @@ height).  Errors are the relative L2 probe-velocity errors of
 the same wall-clock budget (after compilation) unless ``--gns-seconds`` gives the pure
 network its own; ``--iterations`` also caps it and is the length of the learning-rate
 decay ``--lr`` -> ``--lr-final``.  Training runs in pieces: ``--save PREFIX`` keeps each
-network and its training record, ``--resume PREFIX`` continues them (the results report
-the totals and the whole loss curve).  The results end with the wall seconds per coarse
-step of the solver, of each network's step and of the fine reference over the same time.
+network, its optimiser state and its training record, ``--resume PREFIX`` continues them:
+Adam's moments and step count (the schedule's step) carry on, ``--iterations`` counts
+from the first piece, and pieces of one training equal one uninterrupted run of the same
+arguments.  ``--restart-optimizer`` starts a new stage instead from the saved network (a
+new Adam state, a schedule of its own over this piece's ``--iterations``; for a new loss,
+horizon or learning rate).  The results report the totals and the whole loss curve, and
+end with the wall seconds per coarse step of the solver, of each network's step and of
+the fine reference over the same time.
 """
 
 from __future__ import annotations
@@ -98,6 +103,14 @@ def main(argv=None) -> dict:
         help="the network also sees the density deviation (Corrector(density=True))",
     )
     p.add_argument(
+        "--time-scales",
+        type=float,
+        nargs="+",
+        default=None,
+        help="TAU...: the network also sees exp(-k / tau), k the coarse steps since the "
+        "start (Corrector(time_scales=...))",
+    )
+    p.add_argument(
         "--loss",
         choices=list(sil.LOSSES),
         default="relative",
@@ -166,14 +179,23 @@ def main(argv=None) -> dict:
     p.add_argument(
         "--resume",
         default=None,
-        help="PREFIX of an earlier --save: continue training those networks (a new piece "
-        "of --seconds / --iterations with its own schedule); the results report the totals",
+        help="PREFIX of an earlier --save: continue training those networks with their "
+        "optimiser state (--iterations is then the total from the first piece); the "
+        "results report the totals",
+    )
+    p.add_argument(
+        "--restart-optimizer",
+        action="store_true",
+        help="with --resume: a new stage from the saved network, with a new Adam state and "
+        "its own schedule over this piece's --iterations (a new loss, horizon or lr)",
     )
     p.add_argument("--figure", default=None, help="PNG of the error curves (optional)")
     p.add_argument("--small", action="store_true", help="a minute-long smoke run")
     args = p.parse_args(argv)
     if args.lr_final is not None and args.iterations is None:
         p.error("--lr-final needs --iterations (the length of the decay)")
+    if args.restart_optimizer and args.resume is None:
+        p.error("--restart-optimizer needs --resume (the network to start the stage from)")
     if args.small:
         args.n, args.horizon, args.unroll, args.seconds, args.fine_seeds = 8, 20, 5, 10.0, 2
 
@@ -224,14 +246,25 @@ def main(argv=None) -> dict:
             steps=args.message_passing,
             scale=scale,
             density=args.density_input,
+            time_scales=args.time_scales,
         )
         previous = dict(iterations=0, seconds=0.0, cpu_seconds=0.0, losses=[], pieces=0)
-        if args.resume is not None:
-            net = eqx.tree_deserialise_leaves(f"{args.resume}.{mode}.eqx", net)
-            previous = json.loads(Path(f"{args.resume}.{mode}.json").read_text())
         lr = args.lr
         if args.lr_final is not None:
             lr = optax.exponential_decay(args.lr, args.iterations, args.lr_final / args.lr)
+        opt_state, iterations, seed = None, args.iterations, 0
+        if args.resume is not None:
+            net = eqx.tree_deserialise_leaves(f"{args.resume}.{mode}.eqx", net)
+            previous = json.loads(Path(f"{args.resume}.{mode}.json").read_text())
+            saved = Path(f"{args.resume}.{mode}.opt.eqx")
+            if args.restart_optimizer or not saved.exists():
+                seed = previous["iterations"]  # a new stage draws new windows
+            else:
+                seed = previous.get("seed", 0)  # the stage's windows, continued
+                template = sil.optimizer(lr).init(eqx.filter(net, eqx.is_array))
+                opt_state = eqx.tree_deserialise_leaves(saved, template)
+                if iterations is not None:  # the total over the pieces
+                    iterations = max(iterations - sil.completed_iterations(opt_state), 0)
         seconds = args.seconds
         if mode == "gns" and args.gns_seconds is not None:
             seconds = args.gns_seconds
@@ -241,14 +274,15 @@ def main(argv=None) -> dict:
             mode=mode,
             unroll=args.unroll,
             seconds=seconds,
-            iterations=args.iterations,
+            iterations=iterations,
             lr=lr,
             loss=args.loss,
             startup_steps=args.startup_steps,
             startup_weight=args.startup_weight,
             truncate=args.truncate,
             power=args.power,
-            seed=previous["iterations"],  # a resumed piece draws new windows
+            seed=seed,
+            opt_state=opt_state,
         )
         record = dict(
             iterations=previous["iterations"] + res.iterations,
@@ -256,10 +290,12 @@ def main(argv=None) -> dict:
             cpu_seconds=previous["cpu_seconds"] + res.cpu_seconds,
             losses=previous["losses"] + res.losses,
             pieces=previous["pieces"] + 1,
+            seed=seed,  # the window draws of the current stage (train(seed=...))
         )
         if args.save is not None:
             Path(args.save).parent.mkdir(parents=True, exist_ok=True)
             eqx.tree_serialise_leaves(f"{args.save}.{mode}.eqx", res.net)
+            eqx.tree_serialise_leaves(f"{args.save}.{mode}.opt.eqx", res.opt_state)
             Path(f"{args.save}.{mode}.json").write_text(json.dumps(record))
         curves[name] = sil.errors(test_problem, res.net, mode=mode)[0]
         trained[name] = (res.net, mode)

@@ -242,6 +242,8 @@ class Corrector(eqx.Module):
     scale: float = eqx.field(static=True)
     # (rho0, (c0 / U)^2) when the density is an input, else None
     density: tuple | None = eqx.field(static=True)
+    # time constants (coarse steps) of the inputs exp(-k / tau), or None
+    time_scales: tuple | None = eqx.field(static=True)
 
     def __init__(
         self,
@@ -252,6 +254,7 @@ class Corrector(eqx.Module):
         steps=2,
         scale=None,
         density: bool = False,
+        time_scales=None,
     ):
         """``scale``: velocity per unit network output and step (default ``0.01 U`` for
         the correction, ``2 pi U^2 dt`` for the pure network, ``U = problem.speed``).  For a
@@ -263,7 +266,12 @@ class Corrector(eqx.Module):
         U^2`` to first order, eq. 12, with the coarse case's ``rho0`` and ``c0``), which
         carries the acoustic waves that the velocities alone show only after they act.
         ``steps``: message-passing steps (each widens what a particle sees by one
-        neighbour radius)."""
+        neighbour radius).
+
+        ``time_scales=(tau_1, ...)`` (coarse steps): also the inputs ``exp(-k / tau_i)``,
+        ``k`` the coarse steps since the case's initial state, the same on every particle:
+        the time since the start, for a start-up transient whose correction depends on
+        it (and that the velocities do not tell apart from a later state)."""
         if mode not in MODES:
             raise ValueError(f"mode must be one of {', '.join(MODES)}, got {mode!r}")
         if scale is not None and not float(scale) > 0:
@@ -275,7 +283,14 @@ class Corrector(eqx.Module):
             rho0 = float(np.asarray(params.reference_density))
             c0 = float(np.asarray(params.sound_speed))
             self.density = (rho0, (c0 / problem.speed) ** 2)
-        node_in = d + (1 if density else 0)
+        if time_scales is not None:
+            time_scales = tuple(float(t) for t in time_scales)
+            if not time_scales or not all(t > 0 for t in time_scales):
+                raise ValueError(
+                    f"time_scales must be positive numbers of coarse steps, got {time_scales}"
+                )
+        self.time_scales = time_scales
+        node_in = d + (1 if density else 0) + len(time_scales or ())
         gns = GNS(node_in, 2 * d + 1, d, key, latent=latent, hidden=latent, steps=steps)
         # start from "no correction": the zero decoder output (the coarse solver exactly)
         last = gns.decoder.weights[-1]
@@ -287,7 +302,9 @@ class Corrector(eqx.Module):
         default = 0.01 * u if mode == "correction" else 2 * np.pi * u * u * dt
         self.scale = default if scale is None else float(scale)
 
-    def __call__(self, state: State, graph: RadiusGraph, neighbors, speed: float):
+    def __call__(self, state: State, graph: RadiusGraph, neighbors, speed: float, step=0):
+        """The velocity increments and the updated neighbour list; ``step``: the coarse
+        steps since the initial state (read with ``time_scales`` only)."""
         x, v = state.position, state.velocity
         n = x.shape[0]
         neighbors = graph.update(x, neighbors)
@@ -307,6 +324,10 @@ class Corrector(eqx.Module):
             rho0, factor = self.density
             deviation = (state.density / rho0 - 1.0) * factor
             nodes = jnp.concatenate([nodes, deviation[:, None].astype(v.dtype)], -1)
+        if self.time_scales is not None:
+            k = jnp.asarray(step, v.dtype)
+            clock = jnp.exp(-k / jnp.asarray(self.time_scales, v.dtype))
+            nodes = jnp.concatenate([nodes, jnp.broadcast_to(clock, (n, clock.size))], -1)
         out = self.gns(nodes, types, edge, senders, mask)
         return jnp.where(fluid, self.scale * out, 0.0), neighbors
 
@@ -325,18 +346,19 @@ def _wrap(x, case: Case):
     return jnp.where(jnp.asarray(domain.periodic), lo + jnp.mod(x - lo, size), x)
 
 
-def step(problem: Problem, net, mode: str, state: State, params: Params, graph, neighbors):
-    """One coarse step: the solver then the correction (``mode="correction"``), the solver
-    alone (``net=None``), or the network alone (``mode="gns"``)."""
+def step(problem: Problem, net, mode: str, state: State, params: Params, graph, neighbors, k=0):
+    """One coarse step, the ``k``-th since the initial state (``k >= 1``): the solver then
+    the correction (``mode="correction"``), the solver alone (``net=None``), or the network
+    alone (``mode="gns"``)."""
     case = problem.coarse
     if mode == "gns":
-        dv, neighbors = net(state, graph, neighbors, problem.speed)
+        dv, neighbors = net(state, graph, neighbors, problem.speed, k - 1)
         v = state.velocity + dv
         x = _wrap(state.position + problem.dt * v, case)
         return state.replace(position=x, velocity=v), neighbors
     state = simulate(case, params, n_steps=1, dt=problem.dt, state=state).final
     if net is not None:
-        dv, neighbors = net(state, graph, neighbors, problem.speed)
+        dv, neighbors = net(state, graph, neighbors, problem.speed, k)
         state = state.replace(velocity=state.velocity + dv)
     return state, neighbors
 
@@ -350,9 +372,10 @@ def rollout(
     n_steps: int,
     neighbors,
     truncate: int | None = None,
+    start=0,
 ):
-    """``n_steps`` coarse steps from ``state``: ``(states [n_steps], probe fields
-    [n_steps, P, d], overflow)``.
+    """``n_steps`` coarse steps from ``state``, the state after ``start`` steps from the
+    initial one: ``(states [n_steps], probe fields [n_steps, P, d], overflow)``.
 
     ``truncate=K``: the state is cut from the gradient (``jax.lax.stop_gradient``) after
     every ``K`` steps, so the derivative of the probe field at step ``k`` reaches the
@@ -366,7 +389,7 @@ def rollout(
         if truncate is not None:
             cut = (i % truncate == 0) & (i > 0)
             s = jax.tree_util.tree_map(lambda a: jnp.where(cut, jax.lax.stop_gradient(a), a), s)
-        s, nbrs = step(problem, net, mode, s, params, graph, nbrs)
+        s, nbrs = step(problem, net, mode, s, params, graph, nbrs, start + i + 1)
         u = probe_velocity(s, problem.coarse, probes)
         return (s, nbrs, over | overflowed(nbrs)), (s, u)
 
@@ -428,11 +451,47 @@ def coarse_weights(problem: Problem) -> np.ndarray:
 
 @dataclasses.dataclass
 class TrainResult:
+    """What :func:`train` returns.
+
+    Attributes:
+      net: the trained network.
+      losses: the loss of every iteration of this call (before its update).
+      seconds, cpu_seconds: wall and process CPU seconds of this call, after compiling.
+      iterations: the iterations of this call.
+      opt_state: the optimiser state after the last update (Adam's moments and its step
+        count, which is the schedule's step): pass it back as ``train(opt_state=...)`` to
+        continue this training.
+    """
+
     net: object
     losses: list
     seconds: float
     iterations: int
     cpu_seconds: float = float("nan")
+    opt_state: object = None
+
+
+def optimizer(lr: float | optax.Schedule = 1e-3, clip: float = 1.0):
+    """The optimiser of :func:`train`: Adam with learning rate (or optax schedule) ``lr``,
+    gradients clipped to global norm ``clip``.  ``optimizer(lr, clip).init(eqx.filter(net,
+    eqx.is_array))`` has the structure of ``TrainResult.opt_state`` (a template to read a
+    saved state into, e.g. with ``eqx.tree_deserialise_leaves``)."""
+    # clipped gradients: an unrolled solver has occasional large gradients
+    return optax.chain(optax.clip_by_global_norm(clip), optax.adam(lr))
+
+
+def completed_iterations(opt_state) -> int:
+    """The updates an optimiser state of :func:`train` has made (Adam's step count)."""
+    counts = [
+        s.count
+        for s in jax.tree_util.tree_leaves(
+            opt_state, is_leaf=lambda s: isinstance(s, optax.ScaleByAdamState)
+        )
+        if isinstance(s, optax.ScaleByAdamState)
+    ]
+    if len(counts) != 1:
+        raise ValueError("opt_state is not an optimiser state of train (one Adam state)")
+    return int(counts[0])
 
 
 def train(
@@ -452,6 +511,7 @@ def train(
     startup_weight: float | None = None,
     truncate: int | None = None,
     power: float = 2.0,
+    opt_state=None,
     log=print,
 ) -> TrainResult:
     """Train ``net`` by back-propagating through ``unroll`` coarse steps (solver included).
@@ -496,11 +556,20 @@ def train(
     ``K``) steps before it, not through the whole window; the loss values are those of the
     full rollout.
 
-    Adam with gradients clipped to global norm ``clip``; ``lr`` is a number or
-    an optax schedule of the iteration (e.g. ``optax.exponential_decay``, so the steps
-    shrink as the correction settles).  Budget:
-    ``iterations`` and/or wall-clock ``seconds`` (after compiling); the result also
-    records the process's CPU seconds over the same span.
+    Adam with gradients clipped to global norm ``clip`` (:func:`optimizer`); ``lr`` is a
+    number or an optax schedule of the iteration (e.g. ``optax.exponential_decay``, so the
+    steps shrink as the correction settles).  Budget of this call: ``iterations`` and/or
+    wall-clock ``seconds`` (after compiling); the result also records the process's CPU
+    seconds over the same span.
+
+    ``opt_state``: continue an earlier training, given its network and its
+    ``TrainResult.opt_state`` (default: a new Adam state).  The state carries Adam's
+    moments and its step count ``n``; the schedule continues from step ``n``, and the
+    windows are drawn by iteration number (``seed`` and the iteration since the first
+    piece) and the start states refreshed at every ``refresh_every``-th of them, so a
+    training split into pieces, each given the network and state of the one before (and
+    the same arguments), equals one uninterrupted training to round-off; only the start
+    states are recomputed at every piece's start (with the network they then have).
     """
     if loss not in LOSSES:
         raise ValueError(f"loss must be one of {', '.join(LOSSES)}, got {loss!r}")
@@ -559,9 +628,9 @@ def train(
         startup[1 : startup_steps + 1] = startup_weight / startup_steps
     startup = jnp.asarray(startup, reference.dtype)
 
-    def loss_fn(net, state, params, ref, weight, extra):
+    def loss_fn(net, state, params, ref, weight, extra, start):
         _, fields, over = rollout(
-            problem, net, mode, state, params, unroll, neighbors, truncate=truncate
+            problem, net, mode, state, params, unroll, neighbors, truncate=truncate, start=start
         )
         q = (weight * relative_error(fields, ref) ** 2) ** (power / 2)
         value = jnp.mean(q)
@@ -571,18 +640,26 @@ def train(
             value = value ** (2 / power)
         return value, over
 
-    # clipped gradients: an unrolled solver has occasional large gradients
-    optimizer = optax.chain(optax.clip_by_global_norm(clip), optax.adam(lr))
-    opt_state = optimizer.init(eqx.filter(net, eqx.is_array))
+    adam = optimizer(lr, clip)
+    fresh = adam.init(eqx.filter(net, eqx.is_array))
+    if opt_state is None:
+        opt_state = fresh
+    elif jax.tree_util.tree_structure(opt_state) != jax.tree_util.tree_structure(fresh):
+        raise ValueError(
+            "opt_state does not fit this network and lr (a schedule's state differs from a "
+            "constant learning rate's): pass the TrainResult.opt_state of a training of the "
+            "same network with the same kind of lr"
+        )
+    first = completed_iterations(opt_state)
 
     @eqx.filter_jit
-    def update(net, opt_state, state, params, ref, weight, extra):
+    def update(net, opt_state, state, params, ref, weight, extra, start):
         (loss, over), grads = eqx.filter_value_and_grad(loss_fn, has_aux=True)(
-            net, state, params, ref, weight, extra
+            net, state, params, ref, weight, extra, start
         )
         leaves = jax.tree_util.tree_leaves(eqx.filter(grads, eqx.is_array))
         finite = jnp.all(jnp.stack([jnp.all(jnp.isfinite(g)) for g in leaves]))
-        updates, opt_state = optimizer.update(grads, opt_state, eqx.filter(net, eqx.is_array))
+        updates, opt_state = adam.update(grads, opt_state, eqx.filter(net, eqx.is_array))
         return eqx.apply_updates(net, updates), opt_state, loss, over, finite
 
     @eqx.filter_jit
@@ -601,7 +678,6 @@ def train(
             out.append(jax.tree_util.tree_map(lambda a: a[0 : n_starts * unroll : unroll], allst))
         return out
 
-    rng = np.random.default_rng(seed)
     # the training programs are traced with the solver's failures reported as NaN (which
     # the finite-gradient check below stops on), not by host callbacks: JAX writes no
     # program with a host callback to its persistent compilation cache
@@ -616,6 +692,8 @@ def train(
             seconds is not None and elapsed >= seconds
         ):
             break
+        # the window of iteration first + k, whichever piece of a split training runs it
+        rng = np.random.default_rng((seed, first + k))
         c = int(rng.integers(len(problem.conditions)))
         j = int(rng.integers(n_starts))
         state = jax.tree_util.tree_map(lambda a, j=j: a[j], starts[c])
@@ -629,24 +707,27 @@ def train(
                 reference[c, window],
                 weights[c, window],
                 startup[window],
+                jnp.asarray(j * unroll),  # traced: one program for every window
             )
         if bool(over):
             raise RuntimeError("the correction's neighbour list overflowed; raise its capacity")
         if not bool(finite):  # Adam would write NaN into every weight
             raise FloatingPointError(
                 f"train: the gradient through the unrolled solver is not finite at iteration "
-                f"{k + 1} (condition {c}, start {j}, loss {float(value):.4g}); stopped before "
-                f"an update that would make every weight NaN (an unstable coarse step gives "
-                f"NaN too): lower lr or unroll, or use float64"
+                f"{first + k + 1} (condition {c}, start {j}, loss {float(value):.4g}); stopped "
+                f"before an update that would make every weight NaN (an unstable coarse step "
+                f"gives NaN too): lower lr or unroll, or use float64"
             )
         net, opt_state = new_net, new_opt_state
         losses.append(float(value))
         k += 1
         if k == 1:
             t0, c0 = time.perf_counter(), time.process_time()  # budget: after compiling
-        if k % refresh_every == 0:
+        if (first + k) % refresh_every == 0:
             with failures_as_nan():
                 starts = refresh(net)
             mean = np.mean(losses[-refresh_every:])
-            log(f"iteration {k:5d}  t={time.perf_counter() - t0:7.1f}s  loss {mean:.4e}")
-    return TrainResult(net, losses, time.perf_counter() - t0, k, time.process_time() - c0)
+            log(f"iteration {first + k:5d}  t={time.perf_counter() - t0:7.1f}s  loss {mean:.4e}")
+    return TrainResult(
+        net, losses, time.perf_counter() - t0, k, time.process_time() - c0, opt_state
+    )
