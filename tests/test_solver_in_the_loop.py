@@ -9,6 +9,8 @@ most six iterations, its programs compiled once and then read from the compilati
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import jax
 import numpy as np
 import pytest
@@ -304,3 +306,24 @@ def test_meaningless_startup_and_truncation_arguments_are_refused(problem):
         with pytest.raises(ValueError, match=message) as info:
             sil.train(problem, net, unroll=4, iterations=1, log=lambda s: None, **kwargs)
         assert "\n" not in str(info.value)
+
+
+def test_the_scripts_meaningless_arguments_are_refused_before_any_work(tmp_path, capsys):
+    """docs/scripts/solver_in_the_loop.py refuses, in one line naming the flag and before
+    it builds anything: a stage restart with nothing to resume, non-positive time scales,
+    and a --resume PREFIX that no earlier --save wrote."""
+    import importlib.util
+
+    path = Path(__file__).resolve().parent.parent / "docs" / "scripts" / "solver_in_the_loop.py"
+    spec = importlib.util.spec_from_file_location("sil_script", path)
+    script = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(script)
+    missing = str(tmp_path / "nothing")
+    for argv, message in [
+        (["--restart-optimizer"], "--restart-optimizer needs --resume"),
+        (["--time-scales", "5", "0"], "--time-scales must be positive numbers"),
+        (["--resume", missing], f"{missing}.correction.eqx does not exist"),
+    ]:
+        with pytest.raises(SystemExit):
+            script.main(["--out", str(tmp_path / "out.json"), *argv])
+        assert message in capsys.readouterr().err

@@ -196,6 +196,15 @@ def main(argv=None) -> dict:
         p.error("--lr-final needs --iterations (the length of the decay)")
     if args.restart_optimizer and args.resume is None:
         p.error("--restart-optimizer needs --resume (the network to start the stage from)")
+    if args.time_scales is not None and not all(t > 0 for t in args.time_scales):
+        p.error(f"--time-scales must be positive numbers of coarse steps, got {args.time_scales}")
+    for mode in args.networks if args.resume is not None else ():
+        for suffix in ("eqx", "json"):
+            if not Path(f"{args.resume}.{mode}.{suffix}").exists():
+                p.error(
+                    f"--resume {args.resume}: {args.resume}.{mode}.{suffix} does not exist "
+                    f"(give the PREFIX an earlier run wrote with --save and --networks {mode})"
+                )
     if args.small:
         args.n, args.horizon, args.unroll, args.seconds, args.fine_seeds = 8, 20, 5, 10.0, 2
 
@@ -254,15 +263,31 @@ def main(argv=None) -> dict:
             lr = optax.exponential_decay(args.lr, args.iterations, args.lr_final / args.lr)
         opt_state, iterations, seed = None, args.iterations, 0
         if args.resume is not None:
-            net = eqx.tree_deserialise_leaves(f"{args.resume}.{mode}.eqx", net)
+            try:
+                net = eqx.tree_deserialise_leaves(f"{args.resume}.{mode}.eqx", net)
+            except (RuntimeError, ValueError, TypeError):
+                p.error(
+                    f"--resume {args.resume}: the saved {mode} network does not fit this one; "
+                    f"give --latent, --message-passing, --density-input and --time-scales as "
+                    f"in the run that saved it"
+                )
             previous = json.loads(Path(f"{args.resume}.{mode}.json").read_text())
             saved = Path(f"{args.resume}.{mode}.opt.eqx")
+            if not args.restart_optimizer and not saved.exists():
+                print(f"{saved} not found: a new optimiser state, as with --restart-optimizer")
             if args.restart_optimizer or not saved.exists():
                 seed = previous["iterations"]  # a new stage draws new windows
             else:
                 seed = previous.get("seed", 0)  # the stage's windows, continued
                 template = sil.optimizer(lr).init(eqx.filter(net, eqx.is_array))
-                opt_state = eqx.tree_deserialise_leaves(saved, template)
+                try:
+                    opt_state = eqx.tree_deserialise_leaves(saved, template)
+                except (RuntimeError, ValueError, TypeError):
+                    p.error(
+                        f"--resume {args.resume}: the saved optimiser state does not fit this "
+                        f"run's learning rate; give --lr-final as in the run that saved it (a "
+                        f"decay or a constant rate), or --restart-optimizer for a new stage"
+                    )
                 if iterations is not None:  # the total over the pieces
                     iterations = max(iterations - sil.completed_iterations(opt_state), 0)
         seconds = args.seconds
