@@ -94,6 +94,10 @@ def test_a_schedule_reaches_the_optimiser_and_a_split_training_equals_a_whole_on
     constant = sil.optimizer(1e-2).init(eqx.filter(net, eqx.is_array))
     with pytest.raises(ValueError, match="opt_state does not fit this network and lr"):
         sil.train(problem, net, unroll=4, iterations=1, lr=schedule, opt_state=constant)
+    # nor does the state of another network (another latent width)
+    other = sil.Corrector(problem, jax.random.PRNGKey(0), latent=8)
+    with pytest.raises(ValueError, match="opt_state does not fit this network and lr"):
+        sil.train(problem, other, unroll=4, iterations=1, lr=schedule, opt_state=first.opt_state)
 
 
 def test_the_loss_relative_to_the_coarse_solver_by_hand_and_training_lowers_it(problem):

@@ -644,7 +644,12 @@ def train(
     fresh = adam.init(eqx.filter(net, eqx.is_array))
     if opt_state is None:
         opt_state = fresh
-    elif jax.tree_util.tree_structure(opt_state) != jax.tree_util.tree_structure(fresh):
+    elif jax.tree_util.tree_structure(opt_state) != jax.tree_util.tree_structure(fresh) or any(
+        np.shape(a) != np.shape(b)
+        for a, b in zip(
+            jax.tree_util.tree_leaves(opt_state), jax.tree_util.tree_leaves(fresh), strict=True
+        )
+    ):
         raise ValueError(
             "opt_state does not fit this network and lr (a schedule's state differs from a "
             "constant learning rate's): pass the TrainResult.opt_state of a training of the "
