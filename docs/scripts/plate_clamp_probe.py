@@ -3,13 +3,20 @@ profile along the span against Euler-Bernoulli, and variants of the clamp.
 
     python docs/scripts/plate_clamp_probe.py --n 8 --variant base zero_clamp_stress clamp1
 
-Each run: the dry plate of ``validate_fsi.py --dry-only`` (second-order gradient),
+Each run: the dry plate of ``validate_fsi.py --dry-only`` (``--gradient-correction``,
+second order by default),
 ``--periods`` dry periods undamped; prints the mid-span w / w_ref (mid-range and mean over
 the second half), the column-mean profile (time mean over the second half) over
 w_EB(x) = 16 w_ref (x/L)^2 (1 - x/L)^2, and a least-squares fit
 w = c (x + e)^2 (L + e - x)^2 (effective span L + 2 e, compliance c over Euler-Bernoulli's).
 Variants: ``base``; ``zero_clamp_stress`` (the clamped particles' P = 0, i.e. F = I,
-in the force sum); ``clampK`` (only the K clamped columns nearest each end kept).
+in the force sum); ``clampK`` (only the K clamped columns nearest each end kept);
+``inwardK`` (the first K free columns at each end clamped too); ``stiffK`` (the clamped
+particles' stress times K, a clamp material K times stiffer, the step divided by
+sqrt(K)); ``ghost`` (each clamped particle moved to ``X_b - u_m``, m its mirror image
+about the clamp face, its force handed back to m: u = 0 on the face).  Variants that patch
+the solid (``zero_clamp_stress``, ``stiffK``, ``ghost``) each need a process of their own:
+an already compiled run would not see the patch.
 """
 
 from __future__ import annotations
@@ -21,6 +28,7 @@ import pathlib
 import time
 
 import jax
+import jax.numpy as jnp
 import numpy as np
 
 import sphjax
@@ -44,6 +52,60 @@ def _zero_clamped_stress(system, solid, pairs, ctx, reference=None):
         if key in out:
             out[key] = out[key] * free
     return out
+
+
+_STIFFNESS = {"K": 1.0}
+
+
+def _stiff_clamp(system, solid, pairs, ctx, reference=None):
+    """update_solid with the clamped particles' stress times K: a clamp material K times
+    stiffer than the plate's (the force stays the gradient of an energy)."""
+    out = _update_solid(system, solid, pairs, ctx, reference)
+    scale = jnp.where(solid["free"], 1.0, _STIFFNESS["K"])[:, None, None]
+    for key in ("P", "PL0", "PL0q"):
+        if key in out:
+            out[key] = out[key] * scale
+    return out
+
+
+_GHOST = {}
+_body_acceleration = solid_system.SolidSystem.body_acceleration
+
+
+def _ghost_update(system, solid, pairs, ctx, reference=None):
+    """update_solid with each clamped particle b moved to ``X_b - u_m(b)`` (u = x - X),
+    m(b) its mirror image about the clamp face: a ghost whose displacement is the odd
+    continuation of the plate's, so u = 0 on the face (a Dirichlet clamp)."""
+    ghost, mirror = _GHOST["ghost"], _GHOST["mirror"]
+    X, x = solid["X"], solid["x"]
+    x = x.at[ghost].set(X[ghost] - (x[mirror] - X[mirror]))
+    return _update_solid(system, {**solid, "x": x}, pairs, ctx, reference)
+
+
+def _ghost_acceleration(self, view, acceleration, params):
+    """The force on each ghost, negated, added to its mirror image (the energy's gradient
+    through ``u_b = -u_m(b)``); equal masses."""
+    ghost, mirror = _GHOST["ghost"], _GHOST["mirror"]
+    acceleration = acceleration.at[mirror].add(-acceleration[ghost])
+    return _body_acceleration(self, view, acceleration, params)
+
+
+def ghosts(case):
+    X = np.asarray(case.state.reference_position)
+    kind = np.asarray(case.state.kind)
+    dx, L = case.info["dx"], case.info["length"]
+    col = np.round(X[:, 0] / dx - 0.5).astype(int)
+    row = np.floor(X[:, 1] / dx).astype(int)
+    index = {(c, r): i for i, (c, r) in enumerate(zip(col, row, strict=True))}
+    ncol = int(round(L / dx))
+    g, m = [], []
+    for i in np.flatnonzero(kind == Kind.CLAMPED):
+        c, r = col[i], row[i]
+        mc = -c - 1 if c < 0 else 2 * ncol - 1 - c
+        if 0 <= mc < ncol and (mc, r) in index:
+            g.append(i)
+            m.append(index[(mc, r)])
+    _GHOST.update(ghost=jnp.asarray(g), mirror=jnp.asarray(m))
 
 
 def trimmed(case, keep_columns):
@@ -74,21 +136,41 @@ def inward(case, columns):
     return case.replace(state=case.state.replace(kind=kind))
 
 
-def run(n, variant, periods, h_factor=None):
+def run(n, variant, periods, h_factor=None, gradient_correction="second_order"):
     zero = variant == "zero_clamp_stress"
-    solid_system.update_solid = _zero_clamped_stress if zero else _update_solid
+    stiff = variant.startswith("stiff")
+    ghost = variant == "ghost"
+    solid_system.SolidSystem.body_acceleration = (
+        _ghost_acceleration if ghost else _body_acceleration
+    )
+    solid_system.update_solid = (
+        _zero_clamped_stress
+        if zero
+        else _stiff_clamp
+        if stiff
+        else _ghost_update
+        if ghost
+        else _update_solid
+    )
     case = hydrostatic_fsi_plate(
-        n=n, depth=0.5, h_factor=h_factor, gradient_correction="second_order"
+        n=n, depth=0.5, h_factor=h_factor, gradient_correction=gradient_correction
     )
     case = vf.dry_case(case)
     if variant.startswith("clamp"):
         case = trimmed(case, int(variant[5:]))
     if variant.startswith("inward"):
         case = inward(case, int(variant[6:]))
+    if ghost:
+        ghosts(case)
+    if stiff:
+        _STIFFNESS["K"] = float(variant[5:])
+        case = case.replace(dt=case.dt / _STIFFNESS["K"] ** 0.5)
     kind = np.asarray(case.state.kind)
     n_steps = int(round(periods * case.info["dry_period"] / case.dt))
     start = time.perf_counter()
-    traj = sphjax.simulate(case, n_steps=n_steps, save_every=max(1, n_steps // 200))
+    traj = sphjax.simulate(
+        case, n_steps=n_steps, save_every=max(1, n_steps // 200), cell_order=not ghost
+    )
     wall = time.perf_counter() - start
     ref = case.info["reference_deflection"]
     wt = np.asarray(midspan_deflection(traj, case)) / ref
@@ -139,11 +221,12 @@ def main():
     p.add_argument("--variant", nargs="+", default=["base"])
     p.add_argument("--periods", type=float, default=8.0)
     p.add_argument("--h-factor", type=float, default=None)
+    p.add_argument("--gradient-correction", default="second_order")
     p.add_argument("--out", default=None)
     args = p.parse_args()
     for n in args.n:
         for v in args.variant:
-            row = run(n, v, args.periods, args.h_factor)
+            row = run(n, v, args.periods, args.h_factor, args.gradient_correction)
             if args.out:
                 with open(args.out, "a") as f:
                     f.write(json.dumps(row) + "\n")
