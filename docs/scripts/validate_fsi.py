@@ -26,6 +26,9 @@ numbers ``docs/figures/fsi_obstacle.json``.  ``--case gate``: the elastic gate's
 against Antoci et al.'s experiment (``docs/data/antoci_2007_gate_tip_displacement.csv``);
 ``docs/figures/fsi_gate.png`` and ``.json``; with ``--plane-stress`` also the gate of the
 same E and nu in plane stress; ``--outflow-length`` the floor's length past the gate.
+``--case gate --compare RUN.json ...`` runs nothing: it sets stored runs beside the
+experiment and the published numerical results
+(``docs/data/elastic_gate_published_tip_displacement.csv``; :func:`compare_gate`).
 ``--gradient-correction second_order`` builds every case with the second-order solid
 gradient (its step and ``"auto"`` substeps computed for it) and is recorded in the output.
 
@@ -402,6 +405,80 @@ def gate(
     return row
 
 
+PUBLISHED_GATE = {
+    "khayyer2018_isph_sph": "Khayyer et al. 2018 (ISPH-SPH)",
+    "ng2020_sph_vcpm": "Ng et al. 2020 (SPH-VCPM)",
+    "yang2012_sph_fem": "Yang et al. 2012 (SPH-FEM)",
+}
+
+
+def gate_runs(paths):
+    """``{label: (n, gradient, (t, tip))}`` of the gate runs stored by ``--case gate --out``
+    (a run with ``--plane-stress`` holds both gates)."""
+    runs = {}
+    for path in paths:
+        row = json.load(open(path))
+        parts = [("plane strain", row)]
+        if "plane_stress" in row:
+            parts.append(("plane stress", row["plane_stress"]))
+        for kind, part in parts:
+            order = part.get("gradient_correction") or "first_order"
+            label = f"n = {part['n']}, {kind}, {order.replace('_', ' ')}"
+            series = part["series"]
+            runs[label] = (np.asarray(series["time"]), np.asarray(series["tip"]))
+    return runs
+
+
+def compare_gate(paths, t_max=0.36):
+    """The stored gate runs ``paths`` against the experiment and the published numerical
+    results (``docs/data/elastic_gate_published_tip_displacement.csv``): each curve's
+    peak and its time, and the RMS difference of the run from each curve over
+    ``0 <= t <= t_max`` (at the curve's times, over the curve's peak); prints a table per
+    displacement component and writes ``docs/figures/fsi_gate_published.png``.  Runs no
+    simulation."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    exp = read_series(DATA / "antoci_2007_gate_tip_displacement.csv")
+    published = read_series(DATA / "elastic_gate_published_tip_displacement.csv")
+    runs = gate_runs(paths)
+    fig, ax = plt.subplots(1, 2, figsize=(11, 4.2))
+    out = {}
+    for j, key in enumerate(("ux", "uy")):
+        refs = {"Antoci et al. 2007 (experiment)": exp[key]}
+        refs.update({label: published[f"{name}_{key}"] for name, label in PUBLISHED_GATE.items()})
+        names = list(refs)
+        print(f"\n{key}: peak (mm) at t (s); RMS difference / reference peak, 0-{t_max} s")
+        print("| curve | peak | at t | " + " | ".join(names) + " |")
+        for label, (t, u) in list(refs.items()) + [
+            (k, (t, tip[:, j])) for k, (t, tip) in runs.items()
+        ]:
+            pk, pt = peak(t, u)
+            cells = []
+            for ref in names:
+                tr, ur = refs[ref]
+                keep = tr <= t_max
+                cells.append(f"{curve_error(t, u, tr[keep], ur[keep]):.1%}")
+            print(f"| {label} | {1e3 * pk:.1f} | {pt:.3f} | " + " | ".join(cells) + " |")
+            out[f"{key}: {label}"] = dict(
+                peak=pk, peak_time=pt, rms=dict(zip(names, cells, strict=True))
+            )
+        te, ue = exp[key]
+        ax[j].plot(te, 1e3 * ue, "ko", label="Antoci et al. 2007 (experiment)")
+        for (name, label), style in zip(PUBLISHED_GATE.items(), ("g:", "m:", "c:"), strict=True):
+            tr, ur = published[f"{name}_{key}"]
+            ax[j].plot(tr, 1e3 * ur, style, lw=1.5, label=label)
+        for (label, (t, tip)), style in zip(runs.items(), ("b", "r--", "k-.", "y"), strict=False):
+            ax[j].plot(t, 1e3 * tip[:, j], style, label=f"sphjax {label}")
+        ax[j].set(xlabel="t (s)", ylabel=f"{key} (mm)", title=f"gate free end, {key}")
+        ax[j].legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(FIGURES / "fsi_gate_published.png", dpi=110)
+    return out
+
+
 def main(argv=None):
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--case", choices=("plate", "obstacle", "gate"), default="plate")
@@ -451,8 +528,21 @@ def main(argv=None):
         default=None,
         help="gate: the floor's length past the gate (the case's default 0.4 m)",
     )
+    p.add_argument(
+        "--compare",
+        nargs="+",
+        default=None,
+        metavar="RUN_JSON",
+        help="gate: compare stored runs (--out files) with the experiment and the published "
+        "numerical results; runs no simulation",
+    )
     p.add_argument("--out", default=None)
     args = p.parse_args(argv)
+    if args.compare:
+        if args.case != "gate":
+            p.error("--compare: give it with --case gate")
+        compare_gate(args.compare)
+        return
     if args.case in ("gate", "obstacle") and args.dry_only:
         for n in args.n:
             kw = dict(n=n, substeps=1, gradient_correction=args.gradient_correction)
