@@ -349,6 +349,33 @@ def test_plate_carries_the_column(small_plate_2d):
 
 
 @pytest.mark.slow
+def test_gate_opens_as_in_the_experiment_early_on():
+    """The elastic gate's free end over its opening, against Antoci et al. (2007)'s measured
+    horizontal displacement: 12.54 mm at t = 0.0402 s and 34.00 mm at 0.0799 s (their
+    digitised curve, docs/data/antoci_2007_gate_tip_displacement.csv).  Over the opening the
+    published numerical solutions follow the experiment (Khayyer et al. 2018, Ng et al.
+    2020, Yang et al. 2012: 14.4-14.7 mm at 0.04 s, 34.5-36.8 mm at 0.08 s); later they all
+    peak 8-16 % short and 0.04 s early, as sphjax does (docs/validation_fsi.md), so the
+    opening is what a CI-sized test can hold to the experiment.  The case's default gate,
+    2 particles through it (3192 particles, split integration), to t = 0.08 s: measured
+    13.5 mm (+8 %) and 32.7 mm (-4 %).  Bounds: 20 % at 0.04 s, where the published
+    solutions are 15-17 % above the measurement, and 10 % at 0.08 s.  The same gate twice
+    as stiff (E = 24 MPa) gives 12.4 and 25.3 mm (measured): outside the bound at 0.08 s."""
+    from sphjax.cases.fsi import elastic_gate_dam_break
+
+    case = elastic_gate_dam_break(n=2, substeps="auto")
+    n_steps = int(np.ceil(0.081 / case.dt))
+    traj = sphjax.simulate(case, n_steps=n_steps, save_every=10)
+    t = np.asarray(traj.states.time)
+    ux = np.asarray(sphjax.observables.tip_displacement(traj, case))[:, 0]
+    assert np.all(np.isfinite(ux))
+    measured = {0.040154: 0.012537, 0.079923: 0.033997}
+    bound = {0.040154: 0.20, 0.079923: 0.10}
+    for time, value in measured.items():
+        assert abs(np.interp(time, t, ux) / value - 1.0) < bound[time]
+
+
+@pytest.mark.slow
 def test_surface_placed_plate_is_closer_to_euler_bernoulli():
     """The plate with ``placement="surface"`` (rows on both faces, spacing t / (n - 1),
     h = sqrt(2) dx) deflects within 15 % of Euler-Bernoulli's ``-q L^4 / (384 D)`` (Fourey
