@@ -14,8 +14,10 @@ in the force sum); ``clampK`` (only the K clamped columns nearest each end kept)
 ``inwardK`` (the first K free columns at each end clamped too); ``stiffK`` (the clamped
 particles' stress times K, a clamp material K times stiffer, the step divided by
 sqrt(K)); ``ghost`` (each clamped particle moved to ``X_b - u_m``, m its mirror image
-about the clamp face, its force handed back to m: u = 0 on the face).  Variants that patch
-the solid (``zero_clamp_stress``, ``stiffK``, ``ghost``) each need a process of their own:
+about the clamp face, its force handed back to m: u = 0 on the face); ``face`` (the
+clamped lattice replaced by one clamped column on each clamp face, their stress zero).
+Variants that patch
+the solid (``zero_clamp_stress``, ``stiffK``, ``ghost``, ``face``) each need a process of their own:
 an already compiled run would not see the patch.
 """
 
@@ -108,6 +110,36 @@ def ghosts(case):
     _GHOST.update(ghost=jnp.asarray(g), mirror=jnp.asarray(m))
 
 
+def face_clamped(case):
+    """``case`` with its clamped lattice replaced by one column of clamped particles on each
+    clamp face (x = 0 and x = L, the rows of the plate): Dirichlet data u = 0 where the
+    clamp begins, no elastic clamp region beyond it (their stress is zeroed by
+    :func:`_zero_clamped_stress`, so the energy is the free plate's alone)."""
+    X = np.asarray(case.state.reference_position)
+    kind = np.asarray(case.state.kind)
+    dx, L = case.info["dx"], case.info["length"]
+    keep = np.flatnonzero(kind != Kind.CLAMPED)
+    first = np.flatnonzero((kind == Kind.SOLID) & (X[:, 0] < dx))
+    n_all = len(kind)
+    take = np.concatenate([keep, first, first])
+    face = np.concatenate([np.zeros(len(first)), np.full(len(first), L)])
+
+    def pick(a):
+        return a[take] if getattr(a, "ndim", 0) >= 1 and a.shape[0] == n_all else a
+
+    state = jax.tree_util.tree_map(pick, case.state)
+    new = slice(len(keep), None)
+    Xn = np.asarray(state.reference_position).copy()
+    Xn[new, 0] = face
+    kn = np.asarray(state.kind).copy()
+    kn[new] = Kind.CLAMPED
+    state = state.replace(
+        reference_position=jnp.asarray(Xn), position=jnp.asarray(Xn), kind=jnp.asarray(kn)
+    )
+    midspan = tuple(int(np.searchsorted(keep, i)) for i in case.info["midspan_indices"])
+    return case.replace(state=state, info=dict(case.info, midspan_indices=midspan))
+
+
 def trimmed(case, keep_columns):
     """``case`` with only the ``keep_columns`` clamped columns nearest each end."""
     X = np.asarray(case.state.reference_position)
@@ -137,7 +169,7 @@ def inward(case, columns):
 
 
 def run(n, variant, periods, h_factor=None, gradient_correction="second_order"):
-    zero = variant == "zero_clamp_stress"
+    zero = variant in ("zero_clamp_stress", "face")
     stiff = variant.startswith("stiff")
     ghost = variant == "ghost"
     solid_system.SolidSystem.body_acceleration = (
@@ -158,6 +190,8 @@ def run(n, variant, periods, h_factor=None, gradient_correction="second_order"):
     case = vf.dry_case(case)
     if variant.startswith("clamp"):
         case = trimmed(case, int(variant[5:]))
+    if variant == "face":
+        case = face_clamped(case)
     if variant.startswith("inward"):
         case = inward(case, int(variant[6:]))
     if ghost:
