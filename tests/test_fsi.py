@@ -358,7 +358,7 @@ def test_gate_opens_as_in_the_experiment_early_on():
     peak 8-16 % short and 0.04 s early, as sphjax does (docs/validation_fsi.md), so the
     opening is what a CI-sized test can hold to the experiment.  The case's default gate,
     2 particles through it (3192 particles, split integration), to t = 0.08 s: measured
-    13.5 mm (+8 %) and 32.7 mm (-4 %).  Bounds: 20 % at 0.04 s, where the published
+    13.6 mm (+8 %) and 32.7 mm (-4 %).  Bounds: 20 % at 0.04 s, where the published
     solutions are 15-17 % above the measurement, and 10 % at 0.08 s.  The same gate twice
     as stiff (E = 24 MPa) gives 12.4 and 25.3 mm (measured): outside the bound at 0.08 s."""
     from sphjax.cases.fsi import elastic_gate_dam_break
