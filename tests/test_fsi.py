@@ -624,3 +624,25 @@ def test_surface_only_plate_options_are_named():
     free = hydrostatic_fsi_plate(n=3, placement="surface", clamp_end_columns=False)
     held = hydrostatic_fsi_plate(n=3, placement="surface")
     assert free.info["n_solid"] == held.info["n_solid"] + 2 * 3  # the two end columns
+
+
+def test_the_gate_comparison_refuses_bad_arguments_in_one_line(capsys):
+    """docs/scripts/validate_fsi.py --compare (stored gate runs against the experiment and
+    the published solutions) refuses, in one line naming the flag, a file that does not
+    exist and a case other than the gate, before reading anything."""
+    import importlib.util
+    from pathlib import Path
+
+    path = Path(__file__).resolve().parent.parent / "docs" / "scripts" / "validate_fsi.py"
+    spec = importlib.util.spec_from_file_location("validate_fsi_script", path)
+    script = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(script)
+    for argv, says in (
+        (["--case", "gate", "--compare", "no_such_run.json"], "no such file no_such_run.json"),
+        (["--case", "plate", "--compare", str(path)], "give it with --case gate"),
+    ):
+        with pytest.raises(SystemExit) as stop:
+            script.main(argv)
+        assert stop.value.code == 2
+        error = capsys.readouterr().err.strip().splitlines()[-1]
+        assert "--compare" in error and says in error

@@ -43,6 +43,7 @@ from __future__ import annotations
 
 import argparse
 import csv
+import itertools
 import json
 import pathlib
 import time
@@ -413,8 +414,9 @@ PUBLISHED_GATE = {
 
 
 def gate_runs(paths):
-    """``{label: (n, gradient, (t, tip))}`` of the gate runs stored by ``--case gate --out``
-    (a run with ``--plane-stress`` holds both gates)."""
+    """``{label: (t, tip)}`` of the gate runs stored by ``--case gate --out`` (times
+    ``[T]``, free-end displacements ``[T, 2]``; a run with ``--plane-stress`` holds both
+    gates), labelled by resolution, plane strain or stress, and gradient."""
     runs = {}
     for path in paths:
         row = json.load(open(path))
@@ -470,7 +472,8 @@ def compare_gate(paths, t_max=0.36):
         for (name, label), style in zip(PUBLISHED_GATE.items(), ("g:", "m:", "c:"), strict=True):
             tr, ur = published[f"{name}_{key}"]
             ax[j].plot(tr, 1e3 * ur, style, lw=1.5, label=label)
-        for (label, (t, tip)), style in zip(runs.items(), ("b", "r--", "k-.", "y"), strict=False):
+        styles = itertools.cycle(("b", "r--", "k-.", "y"))
+        for (label, (t, tip)), style in zip(runs.items(), styles, strict=False):
             ax[j].plot(t, 1e3 * tip[:, j], style, label=f"sphjax {label}")
         ax[j].set(xlabel="t (s)", ylabel=f"{key} (mm)", title=f"gate free end, {key}")
         ax[j].legend(fontsize=7)
@@ -541,6 +544,9 @@ def main(argv=None):
     if args.compare:
         if args.case != "gate":
             p.error("--compare: give it with --case gate")
+        missing = [path for path in args.compare if not pathlib.Path(path).is_file()]
+        if missing:
+            p.error(f"--compare: no such file {missing[0]} (give runs written by --out)")
         compare_gate(args.compare)
         return
     if args.case in ("gate", "obstacle") and args.dry_only:
