@@ -180,6 +180,13 @@ def test_the_time_since_the_start_reaches_the_network(problem):
             assert change == 0.0
     with pytest.raises(ValueError, match="time_scales must be positive numbers"):
         sil.Corrector(problem, jax.random.PRNGKey(0), time_scales=(0.0,))
+    # a clock the caller did not give is refused, not read as step 0
+    timed = sil.Corrector(problem, jax.random.PRNGKey(0), time_scales=(2,))
+    with pytest.raises(ValueError, match="needs step, the coarse steps since the initial"):
+        timed(state, graph, nbrs, problem.speed)
+    for mode in ("correction", "gns"):
+        with pytest.raises(ValueError, match="needs step"):
+            sil.step(problem, timed, mode, state, problem.coarse.params, graph, nbrs)
 
 
 def test_bad_arguments_are_named(problem):

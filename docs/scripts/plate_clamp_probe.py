@@ -27,6 +27,7 @@ import argparse
 import importlib.util
 import json
 import pathlib
+import re
 import time
 
 import jax
@@ -249,6 +250,19 @@ def run(n, variant, periods, h_factor=None, gradient_correction="second_order"):
     return row
 
 
+#: the variants :func:`run` knows (K: a whole number >= 1; stiffK: a positive number)
+VARIANT = re.compile(r"base|zero_clamp_stress|ghost|face|(clamp|inward)[1-9][0-9]*|stiff[0-9.]+")
+
+
+def _number(text):
+    """``float(text)`` if it is a positive number, else None."""
+    try:
+        value = float(text)
+    except ValueError:
+        return None
+    return value if value > 0 else None
+
+
 def main():
     p = argparse.ArgumentParser()
     p.add_argument("--n", type=int, nargs="+", default=[8])
@@ -258,6 +272,15 @@ def main():
     p.add_argument("--gradient-correction", default="second_order")
     p.add_argument("--out", default=None)
     args = p.parse_args()
+    if not args.periods > 0:
+        p.error(f"--periods: give a positive number of dry periods, got {args.periods}")
+    for v in args.variant:
+        stiffness = v.startswith("stiff") and VARIANT.fullmatch(v) and _number(v[5:])
+        if not VARIANT.fullmatch(v) or (v.startswith("stiff") and not stiffness):
+            p.error(
+                f"--variant: unknown variant {v!r}; give base, zero_clamp_stress, ghost, "
+                "face, clampK, inwardK (K a whole number >= 1) or stiffK (K > 0)"
+            )
     for n in args.n:
         for v in args.variant:
             row = run(n, v, args.periods, args.h_factor, args.gradient_correction)

@@ -302,9 +302,14 @@ class Corrector(eqx.Module):
         default = 0.01 * u if mode == "correction" else 2 * np.pi * u * u * dt
         self.scale = default if scale is None else float(scale)
 
-    def __call__(self, state: State, graph: RadiusGraph, neighbors, speed: float, step=0):
+    def __call__(self, state: State, graph: RadiusGraph, neighbors, speed: float, step=None):
         """The velocity increments and the updated neighbour list; ``step``: the coarse
-        steps since the initial state (read with ``time_scales`` only)."""
+        steps since the initial state, required with ``time_scales`` (else not read)."""
+        if self.time_scales is not None and step is None:
+            raise ValueError(
+                "a Corrector with time_scales needs step, the coarse steps since the "
+                "initial state: net(state, graph, neighbors, speed, step)"
+            )
         x, v = state.position, state.velocity
         n = x.shape[0]
         neighbors = graph.update(x, neighbors)
@@ -346,13 +351,14 @@ def _wrap(x, case: Case):
     return jnp.where(jnp.asarray(domain.periodic), lo + jnp.mod(x - lo, size), x)
 
 
-def step(problem: Problem, net, mode: str, state: State, params: Params, graph, neighbors, k=0):
-    """One coarse step, the ``k``-th since the initial state (``k >= 1``): the solver then
-    the correction (``mode="correction"``), the solver alone (``net=None``), or the network
-    alone (``mode="gns"``)."""
+def step(problem: Problem, net, mode: str, state: State, params: Params, graph, neighbors, k=None):
+    """One coarse step, the ``k``-th since the initial state (``k >= 1``; required by a
+    network with ``time_scales``): the solver then the correction (``mode="correction"``,
+    the network reading the state after ``k`` steps), the solver alone (``net=None``), or
+    the network alone (``mode="gns"``, reading the state after ``k - 1``)."""
     case = problem.coarse
     if mode == "gns":
-        dv, neighbors = net(state, graph, neighbors, problem.speed, k - 1)
+        dv, neighbors = net(state, graph, neighbors, problem.speed, None if k is None else k - 1)
         v = state.velocity + dv
         x = _wrap(state.position + problem.dt * v, case)
         return state.replace(position=x, velocity=v), neighbors
