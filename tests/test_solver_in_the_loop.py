@@ -334,7 +334,30 @@ def test_the_scripts_meaningless_arguments_are_refused_before_any_work(tmp_path,
         (["--restart-optimizer"], "--restart-optimizer needs --resume"),
         (["--time-scales", "5", "0"], "--time-scales must be positive numbers"),
         (["--resume", missing], f"{missing}.correction.eqx does not exist"),
+        (["--warmup", "10"], "--warmup 10 needs --iterations"),
+        (["--warmup", "50", "--iterations", "50"], "must lie between 0 and it"),
     ]:
         with pytest.raises(SystemExit):
             script.main(["--out", str(tmp_path / "out.json"), *argv])
         assert message in capsys.readouterr().err
+
+
+def test_the_scripts_warmup_rises_to_the_rate_then_decays_to_the_final_one():
+    """docs/scripts/solver_in_the_loop.py --warmup W: 0 at the first iteration, --lr after
+    W, --lr-final at --iterations; without a warm-up the decay starts at --lr."""
+    import importlib.util
+
+    path = Path(__file__).resolve().parent.parent / "docs" / "scripts" / "solver_in_the_loop.py"
+    spec = importlib.util.spec_from_file_location("sil_script", path)
+    script = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(script)
+    schedule = script.learning_rate(3e-4, 250, 1e-5, warmup=50)
+    assert float(schedule(0)) == 0.0
+    np.testing.assert_allclose(float(schedule(25)), 1.5e-4, rtol=1e-6)
+    np.testing.assert_allclose(float(schedule(50)), 3e-4, rtol=1e-6)
+    np.testing.assert_allclose(float(schedule(250)), 1e-5, rtol=1e-5)
+    assert float(schedule(150)) < 3e-4
+    constant = script.learning_rate(1e-3, 100, None, warmup=10)
+    np.testing.assert_allclose([float(constant(k)) for k in (5, 10, 99)], [5e-4, 1e-3, 1e-3])
+    np.testing.assert_allclose(float(script.learning_rate(3e-4, 250, 1e-5)(0)), 3e-4)
+    assert script.learning_rate(1e-3) == 1e-3

@@ -80,6 +80,21 @@ def step_costs(problem, nets: dict, repeats: int = 3) -> dict:
     return costs
 
 
+def learning_rate(lr, iterations=None, lr_final=None, warmup=None):
+    """The training's learning rate: ``lr`` constant; with ``lr_final``, an exponential
+    decay from ``lr`` to ``lr_final`` over ``iterations``; with ``warmup`` W, a linear rise
+    from 0 to ``lr`` over the first W iterations, the decay (or the constant) after it, so
+    that the whole schedule still spans ``iterations``."""
+    if warmup is None:
+        if lr_final is None:
+            return lr
+        return optax.exponential_decay(lr, iterations, lr_final / lr)
+    after = optax.constant_schedule(lr)
+    if lr_final is not None:
+        after = optax.exponential_decay(lr, iterations - warmup, lr_final / lr)
+    return optax.join_schedules([optax.linear_schedule(0.0, lr, warmup), after], [warmup])
+
+
 def main(argv=None) -> dict:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--out", required=True, help="JSON file for the results")
@@ -159,6 +174,14 @@ def main(argv=None) -> dict:
         help="decay the learning rate exponentially from --lr to this over --iterations",
     )
     p.add_argument(
+        "--warmup",
+        type=int,
+        default=None,
+        help="W: the learning rate rises linearly from 0 to --lr over the first W "
+        "iterations, then decays as --lr-final says (a new Adam state takes sign-sized "
+        "steps at first; a warm-up keeps them small)",
+    )
+    p.add_argument(
         "--gns-seconds", type=float, default=None, help="the pure network's budget (--seconds)"
     )
     p.add_argument(
@@ -194,6 +217,13 @@ def main(argv=None) -> dict:
     args = p.parse_args(argv)
     if args.lr_final is not None and args.iterations is None:
         p.error("--lr-final needs --iterations (the length of the decay)")
+    if args.warmup is not None and (
+        args.iterations is None or not 0 < args.warmup < args.iterations
+    ):
+        p.error(
+            f"--warmup {args.warmup} needs --iterations and must lie between 0 and it "
+            f"(the warm-up is part of the schedule over --iterations)"
+        )
     if args.restart_optimizer and args.resume is None:
         p.error("--restart-optimizer needs --resume (the network to start the stage from)")
     if args.time_scales is not None and not all(t > 0 for t in args.time_scales):
@@ -258,9 +288,7 @@ def main(argv=None) -> dict:
             time_scales=args.time_scales,
         )
         previous = dict(iterations=0, seconds=0.0, cpu_seconds=0.0, losses=[], pieces=0)
-        lr = args.lr
-        if args.lr_final is not None:
-            lr = optax.exponential_decay(args.lr, args.iterations, args.lr_final / args.lr)
+        lr = learning_rate(args.lr, args.iterations, args.lr_final, args.warmup)
         opt_state, iterations, seed = None, args.iterations, 0
         if args.resume is not None:
             try:
