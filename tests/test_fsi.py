@@ -646,3 +646,51 @@ def test_the_gate_comparison_refuses_bad_arguments_in_one_line(capsys):
         assert stop.value.code == 2
         error = capsys.readouterr().err.strip().splitlines()[-1]
         assert "--compare" in error and says in error
+
+
+def test_validate_fsi_refuses_a_flag_its_mode_would_not_read(capsys):
+    """docs/scripts/validate_fsi.py stops in one line naming the flag, before any run, where
+    the chosen mode would ignore it (a parameter that would do nothing is refused), and
+    accepts the documented commands' flags."""
+    import importlib.util
+    from pathlib import Path
+
+    path = Path(__file__).resolve().parent.parent / "docs" / "scripts" / "validate_fsi.py"
+    spec = importlib.util.spec_from_file_location("validate_fsi_script", path)
+    script = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(script)
+    for argv, says in (
+        (["--case", "gate", "--compare", str(path), "--n", "3"], "--n: --case gate --compare"),
+        (["--case", "gate", "--depth", "0.3"], "--depth: --case gate does not read it"),
+        (["--case", "obstacle", "--substeps", "2"], "--substeps: --case obstacle does"),
+        (["--case", "obstacle", "--n", "2", "3"], "--n: --case obstacle runs one resolution"),
+        (["--case", "gate", "--dry-only", "--frames", "9"], "--frames: --case gate --dry-only"),
+        (["--out", "x.jsonl", "--t-end", "0.2"], "--t-end: --case plate does not read it"),
+        (["--out", "x.jsonl", "--face-weight", "0.5"], "--placement surface only"),
+        (["--out", "x.jsonl", "--no-dry", "--relax"], "--relax: --case plate acts on the dry"),
+        (["--out", "x.jsonl", "--dry-only", "--substeps", "2"], "--case plate runs no coupled"),
+    ):
+        with pytest.raises(SystemExit) as stop:
+            script.main(argv)
+        assert stop.value.code == 2
+        error = capsys.readouterr().err.strip().splitlines()[-1]
+        assert says in error, (argv, error)
+    for argv in (  # documented commands pass the check
+        ["--case", "gate", "--n", "3", "--substeps", "auto", "--t-end", "0.4"],
+        ["--case", "gate", "--n", "2", "--frames", "200", "--plane-stress"],
+        [
+            "--case",
+            "obstacle",
+            "--dry-only",
+            "--n",
+            "2",
+            "3",
+            "--gradient-correction",
+            "second_order",
+        ],
+        ["--case", "obstacle", "--n", "3", "--t-end", "0.35", "--frames", "175"],
+        ["--placement", "surface", "--n", "3", "--substeps", "auto", "--face-weight", "0.5"],
+        ["--dry-only", "--n", "2", "3", "--gradient-correction", "second_order", "--relax"],
+    ):
+        parser = script.build_parser()
+        script.refuse_unread_flags(parser, parser.parse_args(argv))

@@ -482,12 +482,70 @@ def compare_gate(paths, t_max=0.36):
     return out
 
 
-def main(argv=None):
+# the flags each mode of main() reads (besides --case and --out); a flag given to a mode
+# that does not read it would do nothing, and is refused
+COMMON = {"gradient_correction", "t_end", "n"}
+READS = {
+    "compare": {"compare"},
+    "dry cantilever": COMMON | {"dry_only"},
+    "obstacle": COMMON | {"frames"},
+    "gate": COMMON | {"frames", "substeps", "plane_stress", "outflow_length"},
+    "plate": {
+        "gradient_correction", "n", "depth", "periods", "dry_only", "relax", "no_dry",
+        "substeps", "placement", "h_factor", "length", "thickness", "young_modulus",
+        "float64", "face_weight", "free_end_columns",
+    },
+}  # fmt: skip
+
+
+def refuse_unread_flags(parser, args):
+    """Stop, in one line, on a flag that the chosen mode would not read (its value left at
+    the default is fine), or on a combination in which a flag does nothing."""
+    if args.compare:
+        mode = "compare"
+    elif args.case in ("gate", "obstacle") and args.dry_only:
+        mode = "dry cantilever"
+    else:
+        mode = args.case
+    given = {k for k, v in vars(args).items() if v != parser.get_default(k)} - {"case", "out"}
+    refused = [(k, "does not read it: leave it out") for k in sorted(given - READS[mode])]
+    if mode == "plate" and args.placement != "surface":
+        surface_only = "is read with --placement surface only"
+        refused += [(k, surface_only) for k in ("face_weight", "free_end_columns") if k in given]
+    if mode == "plate" and args.no_dry:
+        refused += [
+            (k, "acts on the dry run, which --no-dry leaves out") for k in ("relax",) if k in given
+        ]
+        if args.dry_only:
+            refused.append(("dry_only", "and --no-dry together leave nothing to run"))
+    if mode in ("obstacle", "gate") and args.n is not None and len(args.n) > 1:
+        refused.append(("n", "runs one resolution: give a single --n"))
+    if mode == "plate" and args.dry_only and "substeps" in given:
+        refused.append(("substeps", "runs no coupled run with --dry-only: leave it out"))
+    if mode == "gate" and len(args.substeps) > 1:
+        refused.append(("substeps", "runs one coupled run: give a single --substeps"))
+    if refused:
+        name, reason = refused[0]
+        where = f"--case {args.case}" + {
+            "compare": " --compare",
+            "dry cantilever": " --dry-only",
+        }.get(mode, "")
+        parser.error(f"--{name.replace('_', '-')}: {where} {reason}")
+
+
+def build_parser():
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--case", choices=("plate", "obstacle", "gate"), default="plate")
     p.add_argument("--t-end", type=float, default=None)
     p.add_argument("--frames", type=int, default=400)
-    p.add_argument("--n", type=int, nargs="+", default=[2, 3, 4])
+    p.add_argument(
+        "--n",
+        type=int,
+        nargs="+",
+        default=None,
+        help="particles through the solid (plate and dry runs: default 2 3 4; coupled "
+        "gate and obstacle: one, default 2)",
+    )
     p.add_argument("--depth", type=float, default=0.5)
     p.add_argument("--periods", type=float, default=8.0)
     p.add_argument("--dry-only", action="store_true")
@@ -540,10 +598,18 @@ def main(argv=None):
         "numerical results; runs no simulation",
     )
     p.add_argument("--out", default=None)
+    return p
+
+
+def main(argv=None):
+    p = build_parser()
     args = p.parse_args(argv)
+    if args.compare and args.case != "gate":
+        p.error("--compare: give it with --case gate")
+    refuse_unread_flags(p, args)
+    if args.n is None:
+        args.n = [2] if args.case in ("gate", "obstacle") and not args.dry_only else [2, 3, 4]
     if args.compare:
-        if args.case != "gate":
-            p.error("--compare: give it with --case gate")
         missing = [path for path in args.compare if not pathlib.Path(path).is_file()]
         if missing:
             p.error(f"--compare: no such file {missing[0]} (give runs written by --out)")
