@@ -335,6 +335,16 @@ def test_the_scripts_meaningless_arguments_are_refused_before_any_work(tmp_path,
         (["--time-scales", "5", "0"], "--time-scales must be positive numbers"),
         (["--resume", missing], f"{missing}.correction.eqx does not exist"),
         (["--warmup", "10"], "--warmup 10 needs --iterations"),
+        (["--early", missing], "--early and --switch go together"),
+        (["--early", missing, "--switch", "20"], "--early: a staged correction; give --networks"),
+        (
+            ["--early", missing, "--switch", "1", "--networks", "correction"],
+            "--switch 1: give a coarse step in 2..100",
+        ),
+        (
+            ["--early", missing, "--switch", "20", "--networks", "correction"],
+            f"{missing}.correction.eqx does not exist",
+        ),
         (["--warmup", "50", "--iterations", "50"], "must lie between 0 and it"),
     ]:
         with pytest.raises(SystemExit):
@@ -361,3 +371,39 @@ def test_the_scripts_warmup_rises_to_the_rate_then_decays_to_the_final_one():
     np.testing.assert_allclose([float(constant(k)) for k in (5, 10, 99)], [5e-4, 1e-3, 1e-3])
     np.testing.assert_allclose(float(script.learning_rate(3e-4, 250, 1e-5)(0)), 3e-4)
     assert script.learning_rate(1e-3) == 1e-3
+
+
+def test_a_staged_correction_switches_networks_and_trains_the_late_one_only(problem):
+    """``StagedCorrector(early, late, switch)``: the early network's correction before
+    step ``switch``, the late one's from it on (eager calls); trained, the early network's
+    parameters stay exactly as they were and the late one's change, and the loss falls."""
+    import equinox as eqx
+
+    state, graph, nbrs = problem.coarse.state, sil._graph(problem), sil.allocate(problem)
+    early = sil.Corrector(problem, jax.random.PRNGKey(0))
+    early = eqx.tree_at(
+        lambda n: n.gns.decoder.weights[-1], early, early.gns.decoder.weights[-1] + 0.1
+    )
+    late = sil.Corrector(problem, jax.random.PRNGKey(1))
+    staged = sil.StagedCorrector(early, late, 3)
+    for k, alone in ((1, early), (2, early), (3, late), (4, late)):
+        got, _ = staged(state, graph, nbrs, problem.speed, k)
+        want, _ = alone(state, graph, nbrs, problem.speed, k)
+        np.testing.assert_allclose(np.asarray(got), np.asarray(want), rtol=1e-12, atol=1e-15)
+    assert float(np.abs(np.asarray(staged(state, graph, nbrs, problem.speed, 1)[0])).max()) > 0
+    result = sil.train(problem, staged, unroll=4, iterations=8, lr=1e-2, log=lambda s: None)
+    before, after = eqx.filter(staged, eqx.is_array), eqx.filter(result.net, eqx.is_array)
+    for a, b in zip(jax.tree.leaves(before.early), jax.tree.leaves(after.early), strict=True):
+        np.testing.assert_array_equal(np.asarray(a), np.asarray(b))
+    changed = [
+        not np.array_equal(np.asarray(a), np.asarray(b))
+        for a, b in zip(jax.tree.leaves(before.late), jax.tree.leaves(after.late), strict=True)
+    ]
+    assert any(changed)
+    losses = np.asarray(result.losses)
+    assert np.isfinite(losses).all() and losses[-2:].mean() < losses[0]
+    for switch in (1, True, 2.5):
+        with pytest.raises(ValueError, match="switch must be an integer >= 2"):
+            sil.StagedCorrector(early, late, switch)
+    with pytest.raises(ValueError, match="needs step"):
+        staged(state, graph, nbrs, problem.speed)

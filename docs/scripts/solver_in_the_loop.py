@@ -182,6 +182,20 @@ def main(argv=None) -> dict:
         "steps at first; a warm-up keeps them small)",
     )
     p.add_argument(
+        "--early",
+        default=None,
+        metavar="PREFIX",
+        help="a staged correction: the network PREFIX.correction.eqx (an earlier --save, "
+        "trained on the start-up) corrects the steps before --switch, held fixed, and the "
+        "network trained here the steps from --switch on (StagedCorrector)",
+    )
+    p.add_argument(
+        "--switch",
+        type=int,
+        default=None,
+        help="K: with --early, the first coarse step of the late network",
+    )
+    p.add_argument(
         "--gns-seconds", type=float, default=None, help="the pure network's budget (--seconds)"
     )
     p.add_argument(
@@ -228,6 +242,18 @@ def main(argv=None) -> dict:
         p.error("--restart-optimizer needs --resume (the network to start the stage from)")
     if args.time_scales is not None and not all(t > 0 for t in args.time_scales):
         p.error(f"--time-scales must be positive numbers of coarse steps, got {args.time_scales}")
+    if (args.early is None) != (args.switch is None):
+        p.error("--early and --switch go together (the start-up network and its last step + 1)")
+    if args.early is not None:
+        if args.networks != ["correction"]:
+            p.error("--early: a staged correction; give --networks correction")
+        if not 2 <= args.switch <= args.horizon:
+            p.error(f"--switch {args.switch}: give a coarse step in 2..{args.horizon} (--horizon)")
+        if not Path(f"{args.early}.correction.eqx").exists():
+            p.error(
+                f"--early {args.early}: {args.early}.correction.eqx does not exist (give the "
+                f"PREFIX of a --save with the same --latent, --message-passing and inputs)"
+            )
     for mode in args.networks if args.resume is not None else ():
         for suffix in ("eqx", "json"):
             if not Path(f"{args.resume}.{mode}.{suffix}").exists():
@@ -287,6 +313,16 @@ def main(argv=None) -> dict:
             density=args.density_input,
             time_scales=args.time_scales,
         )
+        if args.early is not None:
+            try:
+                early = eqx.tree_deserialise_leaves(f"{args.early}.correction.eqx", net)
+            except (RuntimeError, ValueError, TypeError):
+                p.error(
+                    f"--early {args.early}: the saved network does not fit this one; give "
+                    f"--latent, --message-passing, --density-input and --time-scales as in "
+                    f"the run that saved it"
+                )
+            net = sil.StagedCorrector(early, net, args.switch)
         previous = dict(iterations=0, seconds=0.0, cpu_seconds=0.0, losses=[], pieces=0)
         lr = learning_rate(args.lr, args.iterations, args.lr_final, args.warmup)
         opt_state, iterations, seed = None, args.iterations, 0
@@ -359,7 +395,7 @@ def main(argv=None) -> dict:
             ),
             wall_seconds_with_compile=time.perf_counter() - t_train,
             final_loss=float(np.mean(res.losses[-10:])),
-            scale=float(res.net.scale),
+            scale=float(getattr(res.net, "late", res.net).scale),  # a staged net: the late one
         )
     for name, curve in curves.items():
         results[name] = {f"error_step_{k}": float(curve[k]) for k in [0, *report]}

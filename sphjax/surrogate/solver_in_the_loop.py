@@ -337,6 +337,51 @@ class Corrector(eqx.Module):
         return jnp.where(fluid, self.scale * out, 0.0), neighbors
 
 
+class StagedCorrector(eqx.Module):
+    """Two corrections in turn: ``early`` at the coarse steps ``k < switch`` (a start-up
+    transient's), ``late`` from step ``switch`` on.  ``early`` is held fixed: its
+    parameters get no gradient (so :func:`train` changes ``late`` only; Adam's update of a
+    parameter that never had a gradient is zero), and only the network of the step is
+    evaluated (``jax.lax.cond``).
+
+    For a flow whose start-up and later steps ask different corrections of one network
+    (the solver-in-the-loop Taylor-Green: a network trained over the whole window gives
+    back at the start-up what it gains later, and one trained on the start-up loses the
+    later steps), each is trained on its own steps: ``early`` over the first
+    ``switch - 1`` steps, then ``StagedCorrector(early, late, switch)`` over the whole
+    window, the loss of the steps before ``switch`` then fixed.  The step is the one of
+    ``Corrector(time_scales=...)``: the coarse steps since the initial state, required."""
+
+    early: eqx.Module
+    late: eqx.Module
+    switch: int = eqx.field(static=True)
+
+    def __init__(self, early, late, switch: int):
+        if isinstance(switch, bool) or int(switch) != switch or not switch >= 2:
+            raise ValueError(
+                f"switch must be an integer >= 2 (the first coarse step of the late "
+                f"correction; step 1 is the first corrected step), got {switch!r}"
+            )
+        self.early, self.late, self.switch = early, late, int(switch)
+
+    def __call__(self, state: State, graph: RadiusGraph, neighbors, speed: float, step=None):
+        """The velocity increments of the network of ``step`` and the updated list."""
+        if step is None:
+            raise ValueError(
+                "a StagedCorrector needs step, the coarse steps since the initial state: "
+                "net(state, graph, neighbors, speed, step)"
+            )
+        arrays, rest = eqx.partition(self.early, eqx.is_array)
+        early = eqx.combine(jax.lax.stop_gradient(arrays), rest)
+        return jax.lax.cond(
+            jnp.asarray(step) < self.switch,
+            lambda s, n: early(s, graph, n, speed, step),
+            lambda s, n: self.late(s, graph, n, speed, step),
+            state,
+            neighbors,
+        )
+
+
 def _graph(problem: Problem) -> RadiusGraph:
     model = problem.coarse.model
     domain = model.domain
