@@ -1,6 +1,7 @@
-"""The C pair loop that benchmarks/pair_loop_ceiling.py times against the XLA step does the
-step's work: from the same lattice start its kinetic energy after 40 steps is sphjax's to
-float32 round-off, visiting each pair once or from both sides (otherwise its timings would
+"""The pair loops that benchmarks/pair_loop_ceiling.py and benchmarks/pair_loop_ffi.py time
+against the XLA step do the step's work: from the same lattice start, after 40 steps, the
+C loop's kinetic energy (each pair once or from both sides) and the FFI handler's
+positions and velocities are sphjax's to float32 round-off (otherwise their timings would
 not be of the same computation)."""
 
 from __future__ import annotations
@@ -45,3 +46,34 @@ def test_the_c_pair_loop_computes_the_sphjax_step(tmp_path):
         assert abs(row["kinetic_energy"] / kinetic - 1) < 1e-5
     # quintic spline, support 3 h = 3 dx: about pi 3^2 = 28 neighbours on the lattice
     assert 26 <= both["neighbours_inside"] <= 30
+
+
+@pytest.mark.skipif(shutil.which("g++") is None, reason="needs a C++ compiler")
+def test_the_ffi_pair_loop_in_a_jitted_scan_is_the_sphjax_step(tmp_path):
+    """benchmarks/pair_loop_ffi.py: the same right-hand side as an XLA FFI handler inside a
+    jitted lax.scan; after 40 steps from the lattice its positions and velocities are
+    sphjax's to float32 round-off."""
+    spec = importlib.util.spec_from_file_location(
+        "pair_loop_ffi", BENCHMARK.parent / "pair_loop_ffi.py"
+    )
+    bench = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(bench)
+    bench.register(bench.build("g++", str(tmp_path)))
+    n, steps = 40, 40
+    case = sphjax.cases.taylor_green(
+        n=n,
+        kernel="quintic_spline",
+        h_factor=1.0,
+        density="summation",
+        transport_velocity=False,
+        disorder=0.0,
+        relax_iterations=0,
+    )
+    dt = 0.25 / n / 11.0
+    run, x0, v0 = bench.simulate_ffi(case, steps, dt)
+    position, velocity = (np.asarray(a) for a in run(x0, v0))
+    traj = sphjax.simulate(case, n_steps=steps, save_every=steps, dt=dt)
+    np.testing.assert_allclose(position, np.asarray(traj.states.position[-1]), atol=1e-6)
+    # velocities of order 1: float32 round-off over 40 steps of two pair sums
+    np.testing.assert_allclose(velocity, np.asarray(traj.states.velocity[-1]), atol=1e-4)
+    assert np.abs(velocity - np.asarray(v0)).max() > 1e-3  # it moved
