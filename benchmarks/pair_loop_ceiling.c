@@ -30,6 +30,19 @@ static inline real wrap(real d) { /* minimum image on the unit square */
     return d - rintf(d);
 }
 
+/* quintic spline f(q) = (3-q)^5 - 6 (2-q)^5 + 15 (1-q)^5 (each term where positive) */
+static inline real shape(real q) {
+    real q3 = fmaxf(3 - q, 0), q2 = fmaxf(2 - q, 0), q1 = fmaxf(1 - q, 0);
+    real q3_2 = q3 * q3, q2_2 = q2 * q2, q1_2 = q1 * q1;
+    return q3_2 * q3_2 * q3 - 6 * q2_2 * q2_2 * q2 + 15 * q1_2 * q1_2 * q1;
+}
+
+/* its derivative f'(q) */
+static inline real shape_derivative(real q) {
+    real q3 = fmaxf(3 - q, 0), q2 = fmaxf(2 - q, 0), q1 = fmaxf(1 - q, 0);
+    return -5 * q3 * q3 * q3 * q3 + 30 * q2 * q2 * q2 * q2 - 75 * q1 * q1 * q1 * q1;
+}
+
 int main(int argc, char **argv) {
     int n = argc > 1 ? atoi(argv[1]) : 200, steps = argc > 2 ? atoi(argv[2]) : 50;
     int N = n * n;
@@ -110,10 +123,7 @@ int main(int argc, char **argv) {
                             real r2 = rx * rx + ry * ry;
                             seen++;
                             if (r2 >= support2) continue;
-                            real r = sqrtf(r2), q = r / h;
-                            real q3 = fmaxf(3 - q, 0), q2 = fmaxf(2 - q, 0), q1 = fmaxf(1 - q, 0);
-                            real q3_2 = q3 * q3, q2_2 = q2 * q2, q1_2 = q1 * q1;
-                            sum += q3_2 * q3_2 * q3 - 6 * q2_2 * q2_2 * q2 + 15 * q1_2 * q1_2 * q1;
+                            sum += shape(sqrtf(r2) / h);
                             inside++;
                         }
                     }
@@ -136,10 +146,7 @@ int main(int argc, char **argv) {
                             real rx = wrap(x[a] - x[b]), ry = wrap(y[a] - y[b]);
                             real r2 = rx * rx + ry * ry;
                             if (r2 >= support2) continue;
-                            real r = sqrtf(r2), q = r / h;
-                            real q3 = fmaxf(3 - q, 0), q2 = fmaxf(2 - q, 0), q1 = fmaxf(1 - q, 0);
-                            real dw = -5 * q3 * q3 * q3 * q3 + 30 * q2 * q2 * q2 * q2 -
-                                      75 * q1 * q1 * q1 * q1;
+                            real r = sqrtf(r2), dw = shape_derivative(r / h);
                             real f = r > 0 ? sigma / h * dw / r : 0; /* grad W = f (r_a - r_b) */
                             real pres = -m * (fa + coef[b]);
                             real visc = m * nu * (ia + inv[b]) * (r2 * f) / (r2 + eta2);
@@ -168,10 +175,7 @@ int main(int argc, char **argv) {
                             real r2 = rx * rx + ry * ry;
                             seen++;
                             if (r2 >= support2) continue;
-                            real r = sqrtf(r2), q = r / h;
-                            real q3 = fmaxf(3 - q, 0), q2 = fmaxf(2 - q, 0), q1 = fmaxf(1 - q, 0);
-                            real q3_2 = q3 * q3, q2_2 = q2 * q2, q1_2 = q1 * q1;
-                            real w = q3_2 * q3_2 * q3 - 6 * q2_2 * q2_2 * q2 + 15 * q1_2 * q1_2 * q1;
+                            real w = shape(sqrtf(r2) / h);
                             sum += w;
                             rho[b] += w;
                             inside += 2;
@@ -181,7 +185,7 @@ int main(int argc, char **argv) {
                 }
         }
         for (int a = 0; a < N; a++) { /* the self term, then the equation of state */
-            rho[a] = m * sigma * (rho[a] + 3 * 3 * 3 * 3 * 3 - 6 * 32 + 15);
+            rho[a] = m * sigma * (rho[a] + shape(0)); /* the self term */
             p[a] = c0 * c0 * (rho[a] - rho0);
             coef[a] = p[a] / (rho[a] * rho[a]);
             inv[a] = 1 / rho[a];
@@ -199,10 +203,7 @@ int main(int argc, char **argv) {
                             real rx = wrap(x[a] - x[b]), ry = wrap(y[a] - y[b]);
                             real r2 = rx * rx + ry * ry;
                             if (r2 >= support2) continue;
-                            real r = sqrtf(r2), q = r / h;
-                            real q3 = fmaxf(3 - q, 0), q2 = fmaxf(2 - q, 0), q1 = fmaxf(1 - q, 0);
-                            real dw = -5 * q3 * q3 * q3 * q3 + 30 * q2 * q2 * q2 * q2 -
-                                      75 * q1 * q1 * q1 * q1;
+                            real r = sqrtf(r2), dw = shape_derivative(r / h);
                             real f = r > 0 ? sigma / h * dw / r : 0;
                             real pres = -m * (fa + coef[b]);
                             real visc = m * nu * (ia + inv[b]) * (r2 * f) / (r2 + eta2);

@@ -72,20 +72,52 @@ def run_sphjax_step(n: int, steps: int, repeats: int) -> dict:
     )
 
 
-def main(argv=None) -> list[dict]:
-    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+def parse(argv, description: str, compiler: str, default: str, what: str):
+    """The arguments both pair-loop benchmarks take (``--n --steps --repeats``, the
+    compiler flag ``compiler`` with its ``default``, ``--no-sphjax``), refused in one line
+    where they cannot run."""
+    p = argparse.ArgumentParser(description=description)
     p.add_argument("--n", type=int, default=200, help="particles per side (n x n)")
     p.add_argument("--steps", type=int, default=100)
     p.add_argument("--repeats", type=int, default=3, help="runs of each row; the best is kept")
-    p.add_argument("--cc", default="gcc", help="C compiler with OpenMP")
-    p.add_argument("--no-sphjax", action="store_true", help="time the C loop alone")
+    p.add_argument(f"--{compiler}", default=default, help=f"the {what} compiler")
+    p.add_argument("--no-sphjax", action="store_true", help="time the pair loop alone")
     args = p.parse_args(argv)
     if args.n < 12:
         p.error(f"--n {args.n}: give at least 12 particles per side (three cells of the support)")
     if args.steps < 1 or args.repeats < 1:
         p.error("--steps and --repeats: give positive numbers")
-    if shutil.which(args.cc) is None:
-        p.error(f"--cc {args.cc}: no such compiler on PATH (install gcc, or name another)")
+    if shutil.which(getattr(args, compiler)) is None:
+        p.error(
+            f"--{compiler} {getattr(args, compiler)}: no such compiler on PATH (install "
+            f"{default}, or name another)"
+        )
+    return args
+
+
+def report(rows: list[dict], args) -> None:
+    """Print the rows (wall and CPU ms per step, particle-steps per CPU-second, CPU time
+    over the last row's, sphjax's, where it was timed) under the run's conditions."""
+    particles = args.n * args.n
+    reference = None if args.no_sphjax else rows[-1]["cpu_ms_per_step"]
+    print(
+        f"Taylor-Green {particles} particles, {args.steps} steps, best of {args.repeats}, "
+        f"float32, load average {os.getloadavg()[0]:.2f}, {time.strftime('%Y-%m-%d %H:%M')}"
+    )
+    print(
+        f"{'row':45s} {'wall ms':>8s} {'CPU ms':>8s} {'M p-steps/CPU-s':>16s} {'CPU / sphjax':>13s}"
+    )
+    for row in rows:
+        rate = particles / (1e3 * row["cpu_ms_per_step"])
+        ratio = "" if reference is None else f"{row['cpu_ms_per_step'] / reference:13.2f}"
+        print(
+            f"{row['label']:45s} {row['wall_ms_per_step']:8.2f} {row['cpu_ms_per_step']:8.2f} "
+            f"{rate:16.2f} {ratio}"
+        )
+
+
+def main(argv=None) -> list[dict]:
+    args = parse(argv, __doc__.split("\n\n")[0], "cc", "gcc", "C (with OpenMP)")
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
         binary = compile_loop(args.cc, tmp)
@@ -101,28 +133,11 @@ def main(argv=None) -> list[dict]:
             rows.append(dict(best, label=label))
     if not args.no_sphjax:
         rows.append(dict(run_sphjax_step(args.n, args.steps, args.repeats), label="sphjax step"))
-    load = os.getloadavg()[0]
-    particles = args.n * args.n
-    reference = rows[-1]["cpu_ms_per_step"] if not args.no_sphjax else None
+    report(rows, args)
     print(
-        f"Taylor-Green {particles} particles, {args.steps} steps, best of {args.repeats}, "
-        f"float32, load average {load:.2f}, {time.strftime('%Y-%m-%d %H:%M')}"
+        f"neighbours inside the support per particle {rows[0]['neighbours_inside']:.1f}, "
+        f"cell-list candidates {rows[0]['candidates']:.1f}"
     )
-    print(
-        f"{'row':45s} {'wall ms':>8s} {'CPU ms':>8s} {'M p-steps/CPU-s':>16s} {'CPU / sphjax':>13s}"
-    )
-    for row in rows:
-        rate = particles / (1e3 * row["cpu_ms_per_step"])
-        ratio = "" if reference is None else f"{row['cpu_ms_per_step'] / reference:13.2f}"
-        print(
-            f"{row['label']:45s} {row['wall_ms_per_step']:8.2f} {row['cpu_ms_per_step']:8.2f} "
-            f"{rate:16.2f} {ratio}"
-        )
-    for row in rows[:1]:
-        print(
-            f"neighbours inside the support per particle {row['neighbours_inside']:.1f}, "
-            f"cell-list candidates {row['candidates']:.1f}"
-        )
     return rows
 
 

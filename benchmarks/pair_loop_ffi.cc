@@ -19,6 +19,19 @@ namespace {
 
 inline float wrap(float d) { return d - std::rint(d); }  // minimum image, unit square
 
+// quintic spline f(q) = (3-q)^5 - 6 (2-q)^5 + 15 (1-q)^5 (each term where positive)
+inline float shape(float q) {
+  float q3 = std::fmax(3 - q, 0.0f), q2 = std::fmax(2 - q, 0.0f), q1 = std::fmax(1 - q, 0.0f);
+  float k3 = q3 * q3, k2 = q2 * q2, k1 = q1 * q1;
+  return k3 * k3 * q3 - 6 * k2 * k2 * q2 + 15 * k1 * k1 * q1;
+}
+
+// its derivative f'(q)
+inline float shape_derivative(float q) {
+  float q3 = std::fmax(3 - q, 0.0f), q2 = std::fmax(2 - q, 0.0f), q1 = std::fmax(1 - q, 0.0f);
+  return -5 * q3 * q3 * q3 * q3 + 30 * q2 * q2 * q2 * q2 - 75 * q1 * q1 * q1 * q1;
+}
+
 ffi::Error TaylorGreenRhs(ffi::Buffer<ffi::F32> x, ffi::Buffer<ffi::F32> v, float h,
                           float mass, float sound_speed, float reference_density,
                           float kinematic_viscosity, ffi::ResultBuffer<ffi::F32> acceleration,
@@ -68,10 +81,7 @@ ffi::Error TaylorGreenRhs(ffi::Buffer<ffi::F32> x, ffi::Buffer<ffi::F32> v, floa
         for (int b = d == c ? a + 1 : start[d]; b < start[d + 1]; b++) {
           float rx = wrap(px[a] - px[b]), ry = wrap(py[a] - py[b]), r2 = rx * rx + ry * ry;
           if (r2 >= support2) continue;
-          float q = std::sqrt(r2) / h;
-          float q3 = std::fmax(3 - q, 0.0f), q2 = std::fmax(2 - q, 0.0f), q1 = std::fmax(1 - q, 0.0f);
-          float k3 = q3 * q3, k2 = q2 * q2, k1 = q1 * q1;
-          float kernel = k3 * k3 * q3 - 6 * k2 * k2 * q2 + 15 * k1 * k1 * q1;
+          float kernel = shape(std::sqrt(r2) / h);
           sum += kernel;
           rho[b] += kernel;
         }
@@ -80,7 +90,7 @@ ffi::Error TaylorGreenRhs(ffi::Buffer<ffi::F32> x, ffi::Buffer<ffi::F32> v, floa
     }
   const float c2 = sound_speed * sound_speed;
   for (int64_t a = 0; a < n; a++) {  // the self term (q = 0), the equation of state
-    rho[a] = mass * sigma * (rho[a] + 243.0f - 6.0f * 32.0f + 15.0f);
+    rho[a] = mass * sigma * (rho[a] + shape(0.0f));
     float p = c2 * (rho[a] - reference_density);
     coef[a] = p / (rho[a] * rho[a]);
     inv[a] = 1.0f / rho[a];
@@ -93,9 +103,7 @@ ffi::Error TaylorGreenRhs(ffi::Buffer<ffi::F32> x, ffi::Buffer<ffi::F32> v, floa
         for (int b = d == c ? a + 1 : start[d]; b < start[d + 1]; b++) {
           float rx = wrap(px[a] - px[b]), ry = wrap(py[a] - py[b]), r2 = rx * rx + ry * ry;
           if (r2 >= support2) continue;
-          float r = std::sqrt(r2), q = r / h;
-          float q3 = std::fmax(3 - q, 0.0f), q2 = std::fmax(2 - q, 0.0f), q1 = std::fmax(1 - q, 0.0f);
-          float dw = -5 * q3 * q3 * q3 * q3 + 30 * q2 * q2 * q2 * q2 - 75 * q1 * q1 * q1 * q1;
+          float r = std::sqrt(r2), dw = shape_derivative(r / h);
           float f = r > 0 ? sigma / h * dw / r : 0.0f;  // grad_a W = f (x_a - x_b)
           float pressure = -mass * (coef[a] + coef[b]);
           float viscous = mass * kinematic_viscosity * (inv[a] + inv[b]) * (r2 * f) / (r2 + eta2);

@@ -15,10 +15,8 @@ jaxlib ships (``jax.ffi.include_dir()``); without a compiler it says so in one l
 
 from __future__ import annotations
 
-import argparse
 import ctypes
 import os
-import shutil
 import subprocess
 import sys
 import tempfile
@@ -92,25 +90,14 @@ def simulate_ffi(case, n_steps: int, dt: float):
 
 
 def main(argv=None) -> list[dict]:
-    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    p.add_argument("--n", type=int, default=200, help="particles per side (n x n)")
-    p.add_argument("--steps", type=int, default=100)
-    p.add_argument("--repeats", type=int, default=3, help="timed runs of each row; the best")
-    p.add_argument("--cxx", default="g++", help="C++ compiler")
-    p.add_argument("--no-sphjax", action="store_true", help="time the FFI step alone")
-    args = p.parse_args(argv)
-    if args.n < 12:
-        p.error(f"--n {args.n}: give at least 12 particles per side (three cells of the support)")
-    if args.steps < 1 or args.repeats < 1:
-        p.error("--steps and --repeats: give positive numbers")
-    if shutil.which(args.cxx) is None:
-        p.error(f"--cxx {args.cxx}: no such compiler on PATH (install g++, or name another)")
+    sys.path.insert(0, str(HERE))
+    from pair_loop_ceiling import parse, report, run_sphjax_step
+
+    args = parse(argv, __doc__.split("\n\n")[0], "cxx", "g++", "C++")
     import jax
+    from throughput import time_step
 
     import sphjax
-
-    sys.path.insert(0, str(HERE))
-    from throughput import run_sphjax, time_step
 
     with tempfile.TemporaryDirectory() as tmp:
         register(build(args.cxx, tmp))
@@ -132,37 +119,14 @@ def main(argv=None) -> list[dict]:
     best = min(range(args.repeats), key=lambda i: cpus[i])
     rows = [
         dict(
-            label="FFI pair loop in a jitted scan",
+            label="FFI pair loop (each pair once) in a jitted scan",
             wall_ms_per_step=1e3 * walls[best] / args.steps,
             cpu_ms_per_step=1e3 * cpus[best] / args.steps,
         )
     ]
     if not args.no_sphjax:
-        row = run_sphjax(args.n, args.steps, args.repeats)
-        i = min(range(args.repeats), key=lambda i: row["cpu_seconds"][i])
-        rows.append(
-            dict(
-                label="sphjax step",
-                wall_ms_per_step=1e3 * row["seconds"][i] / args.steps,
-                cpu_ms_per_step=1e3 * row["cpu_seconds"][i] / args.steps,
-            )
-        )
-    particles = args.n * args.n
-    print(
-        f"Taylor-Green {particles} particles, {args.steps} steps, best of {args.repeats}, "
-        f"float32, load average {os.getloadavg()[0]:.2f}, {time.strftime('%Y-%m-%d %H:%M')}"
-    )
-    print(
-        f"{'row':32s} {'wall ms':>8s} {'CPU ms':>8s} {'M p-steps/CPU-s':>16s} {'CPU / sphjax':>13s}"
-    )
-    reference = rows[-1]["cpu_ms_per_step"] if not args.no_sphjax else None
-    for row in rows:
-        rate = particles / (1e3 * row["cpu_ms_per_step"])
-        ratio = "" if reference is None else f"{row['cpu_ms_per_step'] / reference:13.2f}"
-        print(
-            f"{row['label']:32s} {row['wall_ms_per_step']:8.2f} {row['cpu_ms_per_step']:8.2f} "
-            f"{rate:16.2f} {ratio}"
-        )
+        rows.append(dict(run_sphjax_step(args.n, args.steps, args.repeats), label="sphjax step"))
+    report(rows, args)
     return rows
 
 

@@ -18,6 +18,20 @@ import sphjax
 BENCHMARK = Path(__file__).resolve().parent.parent / "benchmarks" / "pair_loop_ceiling.py"
 
 
+def lattice_taylor_green(n):
+    """The benchmarks' Taylor-Green (benchmarks/throughput.py) from the lattice, the C
+    loops' start."""
+    return sphjax.cases.taylor_green(
+        n=n,
+        kernel="quintic_spline",
+        h_factor=1.0,
+        density="summation",
+        transport_velocity=False,
+        disorder=0.0,
+        relax_iterations=0,
+    )
+
+
 @pytest.mark.skipif(shutil.which("gcc") is None, reason="needs a C compiler")
 def test_the_c_pair_loop_computes_the_sphjax_step(tmp_path):
     spec = importlib.util.spec_from_file_location("pair_loop_ceiling", BENCHMARK)
@@ -27,16 +41,7 @@ def test_the_c_pair_loop_computes_the_sphjax_step(tmp_path):
     n, steps = 40, 40
     both = bench.run_loop(binary, n, steps, threads=1, half=False)
     once = bench.run_loop(binary, n, steps, threads=1, half=True)
-    # the benchmark's Taylor-Green from the lattice (the C loop's start), its time step
-    case = sphjax.cases.taylor_green(
-        n=n,
-        kernel="quintic_spline",
-        h_factor=1.0,
-        density="summation",
-        transport_velocity=False,
-        disorder=0.0,
-        relax_iterations=0,
-    )
+    case = lattice_taylor_green(n)
     traj = sphjax.simulate(case, n_steps=steps, save_every=steps, dt=0.25 / n / 11.0)
     velocity = np.asarray(traj.states.velocity[-1], dtype=np.float64)
     mass = np.asarray(traj.states.mass[-1], dtype=np.float64)
@@ -60,15 +65,7 @@ def test_the_ffi_pair_loop_in_a_jitted_scan_is_the_sphjax_step(tmp_path):
     spec.loader.exec_module(bench)
     bench.register(bench.build("g++", str(tmp_path)))
     n, steps = 40, 40
-    case = sphjax.cases.taylor_green(
-        n=n,
-        kernel="quintic_spline",
-        h_factor=1.0,
-        density="summation",
-        transport_velocity=False,
-        disorder=0.0,
-        relax_iterations=0,
-    )
+    case = lattice_taylor_green(n)
     dt = 0.25 / n / 11.0
     run, x0, v0 = bench.simulate_ffi(case, steps, dt)
     position, velocity = (np.asarray(a) for a in run(x0, v0))
