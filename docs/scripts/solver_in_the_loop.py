@@ -80,6 +80,19 @@ def step_costs(problem, nets: dict, repeats: int = 3) -> dict:
     return costs
 
 
+def read_network(parser, flag: str, prefix: str, mode: str, template):
+    """The network ``PREFIX.<mode>.eqx`` an earlier ``--save`` wrote, read into
+    ``template``; a network of another shape is refused in one line naming the flags."""
+    try:
+        return eqx.tree_deserialise_leaves(f"{prefix}.{mode}.eqx", template)
+    except (RuntimeError, ValueError, TypeError):
+        parser.error(
+            f"{flag} {prefix}: the saved {mode} network does not fit this one; give "
+            f"--latent, --message-passing, --density-input, --time-scales (and --early, "
+            f"--switch for a staged one) as in the run that saved it"
+        )
+
+
 def learning_rate(lr, iterations=None, lr_final=None, warmup=None):
     """The training's learning rate: ``lr`` constant; with ``lr_final``, an exponential
     decay from ``lr`` to ``lr_final`` over ``iterations``; with ``warmup`` W, a linear rise
@@ -314,27 +327,13 @@ def main(argv=None) -> dict:
             time_scales=args.time_scales,
         )
         if args.early is not None:
-            try:
-                early = eqx.tree_deserialise_leaves(f"{args.early}.correction.eqx", net)
-            except (RuntimeError, ValueError, TypeError):
-                p.error(
-                    f"--early {args.early}: the saved network does not fit this one; give "
-                    f"--latent, --message-passing, --density-input and --time-scales as in "
-                    f"the run that saved it"
-                )
+            early = read_network(p, "--early", args.early, "correction", net)
             net = sil.StagedCorrector(early, net, args.switch)
         previous = dict(iterations=0, seconds=0.0, cpu_seconds=0.0, losses=[], pieces=0)
         lr = learning_rate(args.lr, args.iterations, args.lr_final, args.warmup)
         opt_state, iterations, seed = None, args.iterations, 0
         if args.resume is not None:
-            try:
-                net = eqx.tree_deserialise_leaves(f"{args.resume}.{mode}.eqx", net)
-            except (RuntimeError, ValueError, TypeError):
-                p.error(
-                    f"--resume {args.resume}: the saved {mode} network does not fit this one; "
-                    f"give --latent, --message-passing, --density-input and --time-scales as "
-                    f"in the run that saved it"
-                )
+            net = read_network(p, "--resume", args.resume, mode, net)
             previous = json.loads(Path(f"{args.resume}.{mode}.json").read_text())
             saved = Path(f"{args.resume}.{mode}.opt.eqx")
             if not args.restart_optimizer and not saved.exists():

@@ -350,7 +350,9 @@ class StagedCorrector(eqx.Module):
     later steps), each is trained on its own steps: ``early`` over the first
     ``switch - 1`` steps, then ``StagedCorrector(early, late, switch)`` over the whole
     window, the loss of the steps before ``switch`` then fixed.  The step is the one of
-    ``Corrector(time_scales=...)``: the coarse steps since the initial state, required."""
+    ``Corrector(time_scales=...)``: the coarse steps since the initial state, required.
+    Meant for ``mode="correction"``; in ``mode="gns"`` :func:`step` hands the network
+    ``k - 1``, so the late network would take over one step later."""
 
     early: eqx.Module
     late: eqx.Module
