@@ -193,6 +193,22 @@ def apply_sets(case, sets: list[tuple[str, float | tuple]]):
 # ---------------------------------------------------------------------------- saving
 
 
+def with_pair_loop(case, pair_loop: str):
+    """``case`` with ``Model.pair_loop``; for ``"native"`` the loops are built (or found
+    built) now, so that a machine without a compiler is told before the run starts."""
+    import dataclasses
+
+    from sphjax import native
+
+    try:
+        case = case.replace(model=dataclasses.replace(case.model, pair_loop=pair_loop))
+        if pair_loop == "native":
+            native.register()
+    except (ValueError, native.NativeUnavailable) as err:
+        raise UsageError("--pair-loop", str(err)) from None
+    return case
+
+
 def _divisors(n: int) -> list[int]:
     small = [d for d in range(1, math.isqrt(n) + 1) if n % d == 0]
     return sorted(set(small + [n // d for d in small]))
@@ -343,6 +359,8 @@ def run_case(args, out: Path) -> int:
         case = build_case(args.case, dict(args.case_arg), n=args.n, dx=args.dx, t_end=args.t_end)
     base = case
     case = apply_sets(case, args.set)
+    if args.pair_loop != case.model.pair_loop:
+        case = with_pair_loop(case, args.pair_loop)
     p = plan(case, dt=dt, t_end=args.t_end, save_every=save_every, save_dt=save_dt)
     full = p.n_steps // p.save_every
     chunk = frames_per_chunk(full, p.save_every) * p.save_every
@@ -365,6 +383,7 @@ def run_case(args, out: Path) -> int:
     except (ValueError, OSError) as err:
         raise UsageError(None, str(err)) from None
     rate_key = f"{case.name} {jax.default_backend()}{' float64' if args.float64 else ''}"
+    rate_key += " native" if case.model.pair_loop == "native" else ""
     known = remembered_rate(rate_key)
     if known and case.n_particles * p.n_steps / known > LONG_RUN_SECONDS:
         print(

@@ -248,6 +248,14 @@ def _add_run(sub) -> None:
     run.add_argument("--out", default="trajectory.h5", help="output HDF5 file")
     run.add_argument("--overwrite", action="store_true", help="replace an existing --out")
     run.add_argument("--float64", action="store_true", help="run in double precision")
+    run.add_argument(
+        "--pair-loop",
+        choices=("xla", "native"),
+        default="xla",
+        help="'native': the fluid's own pair sums as compiled loops, each pair once "
+        "(CPU only; built with the machine's C++ compiler at first use); see "
+        "Model.pair_loop",
+    )
     run.add_argument("--quiet", action="store_true", help="no progress bar")
 
 

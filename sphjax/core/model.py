@@ -15,8 +15,11 @@ from __future__ import annotations
 
 import dataclasses
 
-from sphjax.core.kernels import Kernel, QuinticSpline
+from sphjax.core.kernels import KERNELS, Kernel, QuinticSpline
 from sphjax.core.params import CONTACT_FIELDS, GROUPS, fields, refusal
+
+#: the values of ``Model.pair_loop``
+PAIR_LOOPS = ("xla", "native")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -68,6 +71,11 @@ class Model:
       pair_block: most particles per block of the pair sums' adjoint passes (``None``:
         all at once); blocks keep each block's per-pair arrays in cache, and are made
         equal (2,640 particles: two blocks of 1,320).
+      pair_loop: ``"xla"`` (default) evaluates every pair sum in XLA, each pair from
+        both sides; ``"native"`` evaluates the fluid's own density and momentum sums
+        with the compiled loops of :mod:`sphjax.native` (each pair once, threads over
+        rows; the CPU only, built with the machine's C++ compiler at first use).
+        Derivatives are the same either way: they always go through XLA.
     """
 
     dim: int
@@ -79,6 +87,7 @@ class Model:
     neighbor_skin: float = 0.25
     pair_adjoint: bool = True
     pair_block: int | None = 2048
+    pair_loop: str = "xla"
 
     def __post_init__(self):
         if self.dim not in (2, 3):
@@ -111,6 +120,23 @@ class Model:
         ):
             raise ValueError(
                 f"Model.pair_block must be None or a positive int, got {self.pair_block!r}"
+            )
+        if self.pair_loop not in PAIR_LOOPS:
+            raise ValueError(f"Model.pair_loop must be 'xla' or 'native', got {self.pair_loop!r}")
+        if self.pair_loop == "native":
+            self._check_native()
+
+    def _check_native(self):
+        """Refuse ``pair_loop="native"`` where no pair sum of the model would use it."""
+        if not any(getattr(s, "params_group", None) == "fluid" for s in self.systems):
+            raise ValueError(
+                "Model.pair_loop='native' has loops for a fluid's own pair sums only and "
+                "this model has no fluid; use pair_loop='xla'"
+            )
+        if type(self.kernel) not in KERNELS.values():
+            raise ValueError(
+                f"Model.pair_loop='native' has loops for the kernels {', '.join(KERNELS)}, "
+                f"not {type(self.kernel).__name__}; use pair_loop='xla' or one of those"
             )
 
     @property

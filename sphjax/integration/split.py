@@ -44,7 +44,6 @@ from sphjax.integration import step as kdk
 from sphjax.integration.stepper import KickDriftKickStepper
 from sphjax.neighbors import reference_pairs, update_neighbors
 from sphjax.physics.interactions import INTERACTIONS
-from sphjax.physics.pairs import Geometry
 from sphjax.physics.rhs import Context, evaluate
 from sphjax.physics.solid.system import SolidSystem, update_solid
 
@@ -102,7 +101,7 @@ def split_step(state: State, neighbors, dt, model, params):
     # the solid's list with its reference geometry, and its L0: computed once per run
     pairs = reference_pairs(neighbors)[(i, i)]
     reference = (neighbors.reference or {}).get(i)
-    ctx = Context(params, Geometry.of(model), model.pair_adjoint, model.pair_block)
+    ctx = Context.of(model, params)
 
     def with_fast(solid):
         return solid.replace(acceleration=fast_acceleration(solid, system, pairs, ctx, reference))

@@ -32,6 +32,7 @@ from typing import NamedTuple
 import jax
 import jax.numpy as jnp
 
+from sphjax import native
 from sphjax.core.space import displacement_fn
 from sphjax.physics import fsi
 from sphjax.physics import pairs as pair_sums
@@ -153,6 +154,40 @@ def _hydrodynamic_pullback(
 
 
 pair_sums.define_pullback(_hydrodynamic_summand, _hydrodynamic_pullback)
+
+
+def _hydrodynamic_loop(keywords, geometry, weight, parity):
+    """The compiled loop of :func:`_hydrodynamic_summand` within one fluid (eq. 10 with
+    Monaghan's and Morris' viscosity); ``None`` with the transport-velocity terms, which
+    it lacks."""
+    if weight != "m" or keywords["stress"] or keywords["shift"] or not keywords["viscous"]:
+        return None
+
+    def loop(rows, idx, shared):
+        parameters = (
+            shared.sound_speed,
+            shared.artificial_alpha,
+            shared.artificial_beta,
+            shared.kinematic_viscosity,
+        )
+        a = native.momentum(
+            rows["x"],
+            rows["v"],
+            rows["m"],
+            rows["rho"],
+            rows["p"],
+            idx,
+            geometry,
+            parameters,
+            artificial=keywords["artificial"],
+            morris=keywords["morris"],
+        )
+        return {"a": a}
+
+    return loop
+
+
+pair_sums.define_native(_hydrodynamic_summand, _hydrodynamic_loop)
 
 
 class FluidPairParameters(NamedTuple):

@@ -766,6 +766,7 @@ def pair_sum(
     parity: int | None = None,
     adjoint: bool = True,
     block: int | None = None,
+    native: bool = False,
 ):
     """``out_a = sum_{b in N(a)} w_b f(pair_ab, a, b, shared)`` over a neighbour list.
 
@@ -788,6 +789,9 @@ def pair_sum(
       adjoint: attach the custom adjoint (else autodiff transposes the forward).
       block: rows per block of the adjoint's passes (``None``: all at once); the forward
         runs over all rows at once (faster on the CPU than blocks).
+      native: evaluate the sum with the compiled loop of :mod:`sphjax.native` where
+        ``f`` has one (:func:`define_native`) and the sum is within one system: each
+        pair once, on the CPU; its derivatives are this function's without ``native``.
     Returns:
       pytree of ``[N_a, ...]`` sums.
     """
@@ -797,6 +801,21 @@ def pair_sum(
     stored = pairs.geometry
     if stored is not None and (not same or pairs.members is not None):
         raise ValueError("pair_sum: a stored geometry needs a sum within one system")
+    loop = None
+    if native and same and stored is None and pairs.members is None:
+        loop = _native_loop(f, geometry, weight, parity)
+    if loop is not None:
+        xla = functools.partial(
+            pair_sum,
+            f,
+            cols=None,
+            geometry=geometry,
+            weight=weight,
+            parity=parity,
+            adjoint=adjoint,
+            block=block,
+        )
+        return _native_sum(loop, xla, rows, pairs, shared)
     if pairs.members is not None:
         return _member_sum(f, rows, cols, pairs, geometry, shared, weight, adjoint, block)
     if not adjoint or _autodiff_transposes(f):
@@ -833,6 +852,60 @@ def pair_sum(
     if stored is not None:
         args.append(stored.mask)
     return fn(*args)
+
+
+# ---------------------------------------------------------------------------- native loops
+
+_NATIVE_LOOPS: dict = {}
+
+
+def define_native(summand: Callable, loop_for: Callable) -> None:
+    """Give ``summand`` a compiled loop of :mod:`sphjax.native`: ``loop_for(keywords,
+    geometry, weight, parity)`` returns ``loop(rows, idx, shared)`` (the sum over the
+    symmetric list ``idx``, as :func:`pair_sum` returns it) for the summand's keyword
+    arguments (those of a ``functools.partial``), or ``None`` where the loop lacks a
+    term they ask for."""
+    _NATIVE_LOOPS[summand] = loop_for
+
+
+def _native_loop(f, geometry, weight, parity):
+    from sphjax import native
+
+    func, keywords = (f.func, f.keywords) if isinstance(f, functools.partial) else (f, {})
+    loop_for = _NATIVE_LOOPS.get(func)
+    if loop_for is None or not native.supports(geometry):
+        return None
+    return loop_for(keywords, geometry, weight, parity)
+
+
+def _native_sum(loop, xla, rows, pairs: PairList, shared):
+    """``loop(rows, idx, shared)``, whose derivative rule is ``xla``'s (the pair sum
+    without ``native``): forward mode, reverse mode and the custom adjoint never see the
+    loop.  Inputs without a tangent stay constants of ``xla`` (no zero tangents are
+    made up and pushed through it)."""
+
+    @jax.custom_jvp
+    def summed(rows, shared, idx):
+        return loop(rows, idx, shared)
+
+    @functools.partial(summed.defjvp, symbolic_zeros=True)
+    def summed_jvp(primals, tangents):
+        *differentiable, idx = primals
+        leaves, treedef = jax.tree_util.tree_flatten(tuple(differentiable))
+        zero = lambda t: isinstance(t, jax.custom_derivatives.SymbolicZero)  # noqa: E731
+        dots = jax.tree_util.tree_leaves(tuple(tangents[:-1]), is_leaf=zero)
+        live = [k for k, t in enumerate(dots) if not zero(t)]
+
+        def of_live(*values):
+            full = list(leaves)
+            for k, value in zip(live, values, strict=True):
+                full[k] = value
+            rows, shared = jax.tree_util.tree_unflatten(treedef, full)
+            return xla(rows, pairs=dataclasses.replace(pairs, idx=idx), shared=shared)
+
+        return jax.jvp(of_live, [leaves[k] for k in live], [dots[k] for k in live])
+
+    return summed(rows, shared, pairs.idx)
 
 
 def _member_sum(f, rows, cols, pairs: PairList, geometry, shared, weight, adjoint, block):

@@ -132,7 +132,7 @@ def with_reference(state: State, neighbors: Neighbors, model) -> Neighbors:
     they are computed from ``state`` (traced under ``jax.grad``), derivatives through them
     are those of the per-step computation.
     """
-    ctx = Context(None, Geometry.of(model), model.pair_adjoint, model.pair_block)
+    ctx = Context.of(model, None)
     reference = {}
     for i, system in enumerate(model.systems):
         if not system.current_configuration and _size(neighbors.blocks[i]):
@@ -154,6 +154,19 @@ class Context:
     block: int | None
     fluid_pairs: PairList | None = None
     reference: dict | None = None
+    #: pair sums within one system by the compiled loops of :mod:`sphjax.native`
+    native: bool = False
+
+    @classmethod
+    def of(cls, model, params) -> Context:
+        """The context of ``model``'s pair sums (its geometry and pair-sum settings)."""
+        return cls(
+            params,
+            Geometry.of(model),
+            model.pair_adjoint,
+            model.pair_block,
+            native=model.pair_loop == "native",
+        )
 
     def pair_sum(self, f, rows, cols, pairs, shared=(), weight=None, parity=None):
         return pairs_module.pair_sum(
@@ -167,6 +180,7 @@ class Context:
             parity=parity,
             adjoint=self.adjoint,
             block=self.block,
+            native=self.native,
         )
 
 
@@ -213,7 +227,7 @@ def evaluate(state: State, neighbors: Neighbors, model, params, density_step=Non
 
 def _evaluate(state: State, neighbors: Neighbors, model, params, density_step=None) -> State:
     """:func:`evaluate` itself (traced into the caller's program)."""
-    ctx = Context(params, Geometry.of(model), model.pair_adjoint, model.pair_block)
+    ctx = Context.of(model, params)
     views = update_stage(state, neighbors, model, params, density_step, ctx)
     return _assemble(state, views, interaction_stage(views, neighbors, model, ctx))
 
@@ -230,7 +244,7 @@ def update_stage(state: State, neighbors: Neighbors, model, params, density_step
     v_viscous``; solid ``L0, F, P, PL0``)."""
     check_params(model, params)
     if ctx is None:
-        ctx = Context(params, Geometry.of(model), model.pair_adjoint, model.pair_block)
+        ctx = Context.of(model, params)
     ctx = dataclasses.replace(ctx, reference=neighbors.reference)
     pairs, blocks = reference_pairs(neighbors), neighbors.blocks
     views = [

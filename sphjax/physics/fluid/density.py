@@ -11,6 +11,7 @@ import dataclasses
 
 import jax.numpy as jnp
 
+from sphjax import native
 from sphjax.core import kernels
 from sphjax.core.space import dot, scale
 from sphjax.physics import pairs as pair_sums
@@ -63,6 +64,27 @@ def _velocity_divergence_pullback(pair, a, b, shared, bar):
 
 
 pair_sums.define_pullback(_velocity_divergence_summand, _velocity_divergence_pullback)
+
+
+def _kernel_loop(keywords, geometry, weight, parity):
+    """The compiled loop of :func:`_kernel_summand` weighted by the mass (eq. 5)."""
+    if weight != "m":
+        return None
+    return lambda rows, idx, shared: native.kernel_sum(rows["x"], rows["m"], idx, geometry)
+
+
+def _velocity_divergence_loop(keywords, geometry, weight, parity):
+    """The compiled loop of :func:`_velocity_divergence_summand` weighted by the mass
+    (eq. 11)."""
+    if weight != "m":
+        return None
+    return lambda rows, idx, shared: native.velocity_divergence(
+        rows["x"], rows["v"], rows["m"], idx, geometry
+    )
+
+
+pair_sums.define_native(_kernel_summand, _kernel_loop)
+pair_sums.define_native(_velocity_divergence_summand, _velocity_divergence_loop)
 
 
 def velocity_divergence(rows: dict, ctx):

@@ -28,7 +28,9 @@ from typing import NamedTuple
 
 import jax.numpy as jnp
 
+from sphjax import native
 from sphjax.core.space import dot
+from sphjax.physics import pairs as pair_sums
 from sphjax.physics.fluid.density import continuity_term
 from sphjax.physics.fluid.viscosity import ETA2
 
@@ -101,6 +103,28 @@ def _continuity_with_diffusion(pair, a, b, shared, *, h):
     hydrostatic = rho0 * sum(gravity[i] * pair.dr[..., i] for i in range(pair.dr.shape[-1])) / c0**2
     volume_b = b["m"] / b["rho"]
     return rate + molteni_term(pair, a["rho"], b["rho"], volume_b, hydrostatic, delta, h, c0)
+
+
+def _molteni_loop(keywords, geometry, weight, parity):
+    """The compiled loop of :func:`_continuity_with_diffusion` (both roles of each pair)."""
+    if weight is not None:
+        return None
+
+    def loop(rows, idx, shared):
+        parameters = (
+            shared.gravity,
+            shared.reference_density,
+            shared.sound_speed,
+            shared.density_diffusion,
+        )
+        return native.continuity_molteni(
+            rows["x"], rows["v"], rows["m"], rows["rho"], idx, geometry, parameters
+        )
+
+    return loop
+
+
+pair_sums.define_native(_continuity_with_diffusion, _molteni_loop)
 
 
 def _renormalisation_summand(pair, a, b, shared):

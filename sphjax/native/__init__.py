@@ -1,0 +1,230 @@
+"""Pair sums as compiled loops on the CPU (``Model.pair_loop="native"``).
+
+XLA evaluates a pair sum over a neighbour list ``[N, K]`` from both sides: every pair
+``(a, b)`` once in ``a``'s row and once in ``b``'s.  A sum within one system whose term
+is symmetric or antisymmetric (``parity`` of :func:`sphjax.physics.pairs.pair_sum`) needs
+each pair once, its term added to both particles, which XLA cannot express cheaply on the
+CPU (the second half is a scatter-add, run serially).  ``pair_sums.cc`` here does it in
+C++ loops over the same neighbour list, rows shared between threads, called from the
+compiled step as XLA foreign functions (``jax.ffi``):
+
+* ``kernel_sum``: ``sum_b m_b W_ab`` (eq. 5 without the self term);
+* ``velocity_divergence``: ``sum_b m_b (v_a - v_b) . grad_a W_ab`` (eq. 11);
+* ``continuity_molteni``: eq. 11 with Molteni & Colagrossi's density diffusion;
+* ``momentum``: eq. 10's pressure term with Monaghan's ``Pi_ab`` and Morris' viscosity.
+
+The library is built with the machine's C++ compiler (``$CXX``, else ``g++``, else
+``c++``) the first time a run needs it and kept in ``$SPHJAX_CACHE_DIR`` (default
+``~/.cache/sphjax``) under a name that changes with the source, the compiler and jaxlib.
+Derivatives never go through it: :func:`sphjax.physics.pairs.pair_sum` gives the native
+sum XLA's sum as its derivative rule (``jax.custom_jvp``), so ``jax.grad``, ``jax.jvp``
+and the pair sums' custom adjoint see exactly the XLA path.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import ctypes
+import fcntl
+import functools
+import hashlib
+import os
+import platform
+import shutil
+import subprocess
+from pathlib import Path
+
+import jax
+import numpy as np
+
+from sphjax.core.kernels import KERNELS
+
+SOURCE = Path(__file__).with_name("pair_sums.cc")
+FLAGS = (
+    "-O3",
+    "-march=native",
+    "-fno-math-errno",  # sqrt without errno: the pair loops vectorise
+    "-fno-trapping-math",
+    "-fopenmp-simd",
+    "-std=c++17",
+    "-shared",
+    "-fPIC",
+    "-pthread",
+)
+#: the handlers of ``pair_sums.cc``: XLA target name -> exported symbol
+TARGETS = {
+    "sphjax_kernel_sum": "SphjaxKernelSum",
+    "sphjax_velocity_divergence": "SphjaxVelocityDivergence",
+    "sphjax_continuity_molteni": "SphjaxContinuityMolteni",
+    "sphjax_momentum": "SphjaxMomentum",
+}
+#: the kernels ``pair_sums.cc`` knows, by name (its ids)
+KERNEL_IDS = {"cubic_spline": 0, "quintic_spline": 1, "wendland_c2": 2, "wendland_c4": 3}
+
+
+class NativeUnavailable(RuntimeError):
+    """``Model.pair_loop="native"`` cannot run here (no compiler, not a CPU)."""
+
+
+def compiler() -> str | None:
+    """The C++ compiler to build with: ``$CXX``, else ``g++``, else ``c++`` (``None``)."""
+    for name in (os.environ.get("CXX"), "g++", "c++"):
+        if name and shutil.which(name):
+            return name
+    return None
+
+
+def _cache_dir() -> Path:
+    root = os.environ.get("SPHJAX_CACHE_DIR") or os.path.join(
+        os.environ.get("XDG_CACHE_HOME") or os.path.expanduser("~/.cache"), "sphjax"
+    )
+    return Path(root) / "native"
+
+
+def _cpu_model() -> str:
+    with contextlib.suppress(OSError):
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                return line
+    return platform.processor()
+
+
+@functools.cache
+def library() -> str:
+    """Path of the built library (built now if no build of this source is cached)."""
+    cxx = compiler()
+    if cxx is None:
+        raise NativeUnavailable(
+            "Model.pair_loop='native' needs a C++ compiler to build sphjax's pair loops "
+            "and none was found ($CXX, g++, c++); install one or use pair_loop='xla'"
+        )
+    version = subprocess.run([cxx, "--version"], capture_output=True, text=True).stdout
+    key = hashlib.sha256(
+        "\n".join(
+            [SOURCE.read_text(), " ".join(FLAGS), version, jax.__version__, _cpu_model()]
+        ).encode()
+    ).hexdigest()[:16]
+    directory = _cache_dir()
+    directory.mkdir(parents=True, exist_ok=True)
+    target = directory / f"pair_sums-{key}.so"
+    with open(directory / "build.lock", "w") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)  # one build at a time (test workers, processes)
+        if not target.exists():
+            partial = target.with_suffix(f".{os.getpid()}.tmp")
+            command = [cxx, *FLAGS, "-I", jax.ffi.include_dir(), "-o", str(partial), str(SOURCE)]
+            built = subprocess.run(command, capture_output=True, text=True)
+            if built.returncode != 0:
+                raise NativeUnavailable(
+                    "Model.pair_loop='native': building sphjax's pair loops failed "
+                    f"({' '.join(command)}): {built.stderr.strip().splitlines()[-1:]}; "
+                    "use pair_loop='xla'"
+                )
+            os.replace(partial, target)
+    return str(target)
+
+
+@functools.cache
+def register() -> None:
+    """Build (if needed) and register the handlers with XLA's CPU backend, once."""
+    if jax.default_backend() != "cpu":
+        raise NativeUnavailable(
+            "Model.pair_loop='native' runs on the CPU only; JAX's default device here is "
+            f"{jax.default_backend()!r}: use pair_loop='xla'"
+        )
+    handle = ctypes.cdll.LoadLibrary(library())
+    for target, symbol in TARGETS.items():
+        capsule = jax.ffi.pycapsule(getattr(handle, symbol))
+        jax.ffi.register_ffi_target(target, capsule, platform="cpu")
+
+
+def supports(geometry) -> bool:
+    """Whether ``pair_sums.cc`` has ``geometry``'s kernel (the four of
+    :data:`sphjax.core.kernels.KERNELS`, not a subclass a user wrote)."""
+    return type(geometry.kernel) in KERNELS.values()
+
+
+def _kernel_name(kernel) -> str:
+    return next(name for name, cls in KERNELS.items() if type(kernel) is cls)
+
+
+def _attributes(geometry) -> dict:
+    """The pair geometry as the handlers' attributes (kernel, ``h``, cutoff, box)."""
+    size = list(geometry.domain.size) + [1.0] * (3 - geometry.dim)
+    periodic = sum(1 << i for i, p in enumerate(geometry.domain.periodic) if p)
+    return dict(
+        kernel=np.int64(KERNEL_IDS[_kernel_name(geometry.kernel)]),
+        h=np.float64(geometry.smoothing_length),
+        cutoff=np.float64(geometry.cutoff),
+        sigma=np.float64(geometry.kernel.normalisation(geometry.dim)),
+        lx=np.float64(size[0]),
+        ly=np.float64(size[1]),
+        lz=np.float64(size[2]),
+        periodic=np.int64(periodic),
+    )
+
+
+def _call(target, shape, dtype, geometry, *args, **attributes):
+    register()
+    result = jax.ShapeDtypeStruct(shape, dtype)
+    call = jax.ffi.ffi_call(target, result, vmap_method="sequential")
+    return call(*args, **_attributes(geometry), **attributes)
+
+
+def _list(idx):
+    return idx.astype(np.int32)
+
+
+def kernel_sum(x, m, idx, geometry):
+    """``sum_b m_b W_ab`` over the symmetric list ``idx`` (``[N]``; no self term)."""
+    return _call("sphjax_kernel_sum", m.shape, x.dtype, geometry, x, m, _list(idx))
+
+
+def velocity_divergence(x, v, m, idx, geometry):
+    """``sum_b m_b (v_a - v_b) . grad_a W_ab`` over the symmetric list ``idx`` (``[N]``)."""
+    return _call("sphjax_velocity_divergence", m.shape, x.dtype, geometry, x, v, m, _list(idx))
+
+
+def continuity_molteni(x, v, m, rho, idx, geometry, parameters):
+    """Eq. 11 with Molteni & Colagrossi's density diffusion, its hydrostatic part removed
+    (:func:`sphjax.physics.fluid.density_diffusion.molteni_term`), over the symmetric list
+    ``idx`` (``[N]``).  ``parameters``: ``(gravity [d], reference_density, sound_speed,
+    density_diffusion)``."""
+    gravity, *scalars = (jax.numpy.asarray(q, x.dtype) for q in parameters)
+    return _call(
+        "sphjax_continuity_molteni",
+        m.shape,
+        x.dtype,
+        geometry,
+        x,
+        v,
+        m,
+        rho,
+        _list(idx),
+        gravity,
+        *scalars,
+    )
+
+
+def momentum(x, v, m, rho, p, idx, geometry, parameters, *, artificial: bool, morris: bool):
+    """Eq. 10's pair terms per unit of the rows' own mass, ``[N, d]``:
+    ``sum_b m_b [-(p_a/rho_a^2 + p_b/rho_b^2 + Pi_ab) grad_a W_ab + Morris]``.
+
+    ``parameters``: ``(sound_speed, artificial_alpha, artificial_beta,
+    kinematic_viscosity)`` (arrays of the run's dtype); ``artificial``, ``morris``: which
+    viscous terms (Monaghan's ``Pi_ab``, Morris et al. 1997)."""
+    scalars = [jax.numpy.asarray(q, x.dtype) for q in parameters]
+    return _call(
+        "sphjax_momentum",
+        x.shape,
+        x.dtype,
+        geometry,
+        x,
+        v,
+        m,
+        rho,
+        p,
+        _list(idx),
+        *scalars,
+        artificial=bool(artificial),
+        morris=bool(morris),
+    )

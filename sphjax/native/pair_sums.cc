@@ -1,0 +1,616 @@
+// sphjax's pair sums within one fluid as compiled loops, called from XLA (FFI handlers).
+//
+// The pair sums of sphjax.physics.pairs.pair_sum over a symmetric neighbour list
+// (b in N(a) iff a in N(b)) evaluate each pair once and add its term to both particles:
+// for a term f with f(b, a) = parity f(a, b) and the weight w_b,
+//
+//     out_a += w_b f(a, b),    out_b += parity w_a f(a, b)          (each pair a < b once)
+//
+// which halves the pair arithmetic of XLA's sum, which visits every pair from both
+// sides.  Threads take equal ranges of rows and add into their own copies of the
+// output, summed at the end (no two threads write one number).
+//
+// Sums (one handler each, float32 or float64, 2 or 3 dimensions):
+//   sphjax_kernel_sum          sum_b m_b W_ab                          (eq. 5 without the
+//                                                                       self term)
+//   sphjax_velocity_divergence sum_b m_b (v_a - v_b) . grad_a W_ab     (eq. 11)
+//   sphjax_continuity_molteni  eq. 11 plus Molteni & Colagrossi's density diffusion
+//                              (hydrostatic part removed; not symmetric: both roles)
+//   sphjax_momentum            sum_b m_b [-(P_a + P_b + Pi_ab) grad_a W_ab
+//                                   + nu (1/rho_a + 1/rho_b) (r_ab . grad_a W_ab)
+//                                     / (r_ab^2 + 0.01 h^2) v_ab]      (eq. 10, Monaghan's
+//                                                                       Pi_ab and Morris'
+//                                                                       viscosity optional)
+// with P = p / rho^2.  Pair geometry as sphjax.physics.pairs.Geometry: r_ab = x_a - x_b
+// with the minimum image on periodic axes, pairs with |r_ab| >= cutoff left out, W and
+// grad_a W = W'(r) / r r_ab of the kernel (0 at r = 0).
+#include <algorithm>
+#include <cmath>
+#include <cstdint>
+#include <cstdlib>
+#include <thread>
+#include <vector>
+
+#include "xla/ffi/api/ffi.h"
+
+namespace ffi = xla::ffi;
+
+namespace {
+
+constexpr double kEta2 = 0.01;  // the 0.01 h^2 in the viscous denominators
+
+template <typename T>
+inline T positive(T x) {
+  return x > T(0) ? x : T(0);
+}
+
+// kernel shapes f(q) and f'(q) of sphjax.core.kernels, by the ids of sphjax/native
+template <typename T, int Kernel>
+struct Shape;
+
+template <typename T>
+struct Shape<T, 0> {  // cubic spline
+  static T value(T q) {
+    T a = positive(T(2) - q), b = positive(T(1) - q);
+    return T(0.25) * a * a * a - b * b * b;
+  }
+  static T derivative(T q) {
+    T a = positive(T(2) - q), b = positive(T(1) - q);
+    return T(-0.75) * a * a + T(3) * b * b;
+  }
+};
+
+template <typename T>
+struct Shape<T, 1> {  // quintic spline
+  static T value(T q) {
+    T a = positive(T(3) - q), b = positive(T(2) - q), c = positive(T(1) - q);
+    T a2 = a * a, b2 = b * b, c2 = c * c;
+    return a2 * a2 * a - T(6) * b2 * b2 * b + T(15) * c2 * c2 * c;
+  }
+  static T derivative(T q) {
+    T a = positive(T(3) - q), b = positive(T(2) - q), c = positive(T(1) - q);
+    T a2 = a * a, b2 = b * b, c2 = c * c;
+    return T(-5) * (a2 * a2 - T(6) * b2 * b2 + T(15) * c2 * c2);
+  }
+};
+
+template <typename T>
+struct Shape<T, 2> {  // Wendland C2
+  static T value(T q) {
+    T s = positive(T(1) - T(0.5) * q), s2 = s * s;
+    return s2 * s2 * (T(2) * q + T(1));
+  }
+  static T derivative(T q) {
+    T s = positive(T(1) - T(0.5) * q);
+    return T(-5) * q * s * s * s;
+  }
+};
+
+template <typename T>
+struct Shape<T, 3> {  // Wendland C4
+  static T value(T q) {
+    T s = positive(T(1) - T(0.5) * q), s2 = s * s;
+    return s2 * s2 * s2 * (T(35.0 / 12.0) * q * q + T(3) * q + T(1));
+  }
+  static T derivative(T q) {
+    T s = positive(T(1) - T(0.5) * q), s2 = s * s;
+    return -T(14.0 / 3.0) * q * (T(1) + T(2.5) * q) * s2 * s2 * s;
+  }
+};
+
+// what every pair sees: the kernel's scale and the box
+template <typename T>
+struct Setting {
+  T h, inverse_h, cutoff2, w_scale, grad_scale;  // W = w_scale f(q), W' = grad_scale f'(q)
+  T size[3];        // the box's lengths on the periodic axes, 0 on the others
+  T inverse[3];     // their inverses (0 on the others: no image is subtracted)
+};
+
+// one pair's geometry
+template <typename T, int D>
+struct Pair {
+  T dr[D];    // r_a - r_b (minimum image)
+  T r2;       // |r_ab|^2
+  T w;        // W_ab
+  T grad[D];  // grad_a W_ab
+};
+
+// The loop.  For each row a of the list, its neighbours b > a are gathered into
+// contiguous buffers (positions, and the Term's F numbers per neighbour: Term::load),
+// then one vectorised loop over them computes each pair's geometry and the Term's W
+// numbers for a and for b (Term::pair); a's are summed, b's added to the output one by
+// one after.  Pairs outside the support have W = grad W = 0, so every term is 0 there and
+// the loop has no branch.  Threads take equal ranges of rows, each with its own output
+// copy.
+template <typename T, int D, int Kernel, typename Term>
+void each_pair_once(const Setting<T>& s, const T* x, const int32_t* idx, int64_t n, int64_t k,
+                    T* out, const Term& term) {
+  constexpr int W = Term::width, F = Term::fields;
+  int64_t threads = 1;
+  if (const char* env = std::getenv("SPHJAX_NATIVE_THREADS")) {
+    threads = std::max<int64_t>(1, std::atoll(env));
+  } else {
+    threads = std::max<int64_t>(1, std::thread::hardware_concurrency());
+  }
+  threads = std::min<int64_t>(threads, std::max<int64_t>(1, n / 1024));
+  std::vector<std::vector<T>> copies(threads - 1, std::vector<T>(n * W, T(0)));
+  std::fill(out, out + n * W, T(0));
+  auto rows = [&](int64_t t) {
+    T* acc = t == 0 ? out : copies[t - 1].data();
+    const int64_t lo = n * t / threads, hi = n * (t + 1) / threads;
+    std::vector<int32_t> later(k);                   // the row's neighbours b > a
+    std::vector<T> buffer((D + F + 2 * W) * k + 1);  // theirs: x, the Term's, for a, b
+    T* xb = buffer.data();
+    T* fb = xb + D * k;
+    T* oa = fb + F * k;
+    T* ob = oa + W * k;
+    for (int64_t a = lo; a < hi; a++) {
+      const int32_t* row = idx + a * k;
+      int64_t count = 0;
+      for (int64_t j = 0; j < k; j++) {  // without a branch: which b > a is unpredictable
+        later[count] = row[j];
+        count += (row[j] > a) & (row[j] < n);
+      }
+      for (int64_t j = 0; j < count; j++) {
+        const int64_t b = later[j];
+        for (int i = 0; i < D; i++) xb[i * k + j] = x[b * D + i];
+        term.load(b, fb + j, k);
+      }
+      T xa[D];
+      for (int i = 0; i < D; i++) xa[i] = x[a * D + i];
+      const auto own = term.row(a);
+#pragma omp simd
+      for (int64_t j = 0; j < count; j++) {
+        Pair<T, D> p;
+        T r2 = T(0);
+        for (int i = 0; i < D; i++) {
+          T d = xa[i] - xb[i * k + j];
+          d -= s.size[i] * std::nearbyint(d * s.inverse[i]);  // the minimum image
+          p.dr[i] = d;
+          r2 += d * d;
+        }
+        const T inside = r2 < s.cutoff2 ? T(1) : T(0);
+        const T r = std::sqrt(r2);
+        const T q = r * s.inverse_h;
+        const T safe = r > T(0) ? r : T(1);
+        p.r2 = r2;
+        p.w = inside * s.w_scale * Shape<T, Kernel>::value(q);
+        const T factor = r > T(0) ? inside * s.grad_scale * Shape<T, Kernel>::derivative(q) / safe
+                                  : T(0);
+        for (int i = 0; i < D; i++) p.grad[i] = factor * p.dr[i];
+        T on_a[W], on_b[W];
+        term.pair(own, p, fb + j, k, on_a, on_b);
+        for (int w = 0; w < W; w++) {
+          oa[w * k + j] = on_a[w];
+          ob[w * k + j] = on_b[w];
+        }
+      }
+      for (int w = 0; w < W; w++) {
+        T sum = T(0);
+        for (int64_t j = 0; j < count; j++) sum += oa[w * k + j];
+        acc[a * W + w] += sum;
+      }
+      for (int64_t j = 0; j < count; j++)
+        for (int w = 0; w < W; w++) acc[later[j] * W + w] += ob[w * k + j];
+    }
+  };
+  std::vector<std::thread> workers;
+  for (int64_t t = 1; t < threads; t++) workers.emplace_back(rows, t);
+  rows(0);
+  for (auto& w : workers) w.join();
+  for (const auto& copy : copies)
+    for (int64_t i = 0; i < n * W; i++) out[i] += copy[i];
+}
+
+template <typename T, int D, typename Term>
+void by_kernel(int kernel, const Setting<T>& s, const T* x, const int32_t* idx, int64_t n,
+               int64_t k, T* out, const Term& term) {
+  switch (kernel) {
+    case 0: return each_pair_once<T, D, 0>(s, x, idx, n, k, out, term);
+    case 1: return each_pair_once<T, D, 1>(s, x, idx, n, k, out, term);
+    case 2: return each_pair_once<T, D, 2>(s, x, idx, n, k, out, term);
+    default: return each_pair_once<T, D, 3>(s, x, idx, n, k, out, term);
+  }
+}
+
+template <typename T>
+Setting<T> setting(int dim, double h, double cutoff, double sigma, double lx, double ly,
+                   double lz, int64_t periodic) {
+  Setting<T> s;
+  s.h = T(h);
+  s.inverse_h = T(1.0 / h);
+  s.cutoff2 = T(cutoff * cutoff);
+  s.w_scale = T(sigma / std::pow(h, dim));
+  s.grad_scale = T(sigma / std::pow(h, dim + 1));
+  const double size[3] = {lx, ly, lz};
+  for (int i = 0; i < 3; i++) {
+    const bool on = (periodic >> i) & 1;
+    s.size[i] = on ? T(size[i]) : T(0);
+    s.inverse[i] = on ? T(1.0 / size[i]) : T(0);
+  }
+  return s;
+}
+
+// ------------------------------------------------------------------ the sums
+//
+// A Term: `width` numbers per particle out, `fields` numbers per neighbour gathered by
+// load(b, into, stride) (into[f * stride] for f < fields), row(a): what it reads of a,
+// pair(own, p, from, stride, on_a, on_b): the pair's numbers for a and for b.
+
+template <typename T, int D>
+struct KernelSumTerm {  // sum_b m_b W_ab
+  static constexpr int width = 1, fields = 1;
+  const T* m;
+  void load(int64_t b, T* into, int64_t stride) const { into[0] = m[b]; }
+  T row(int64_t a) const { return m[a]; }
+  void pair(T m_a, const Pair<T, D>& p, const T* from, int64_t stride, T* on_a, T* on_b) const {
+    on_a[0] = from[0] * p.w;
+    on_b[0] = m_a * p.w;
+  }
+};
+
+template <typename T, int D>
+struct Own {  // what the divergence and the diffusion read of a
+  T m, rho, v[D];
+};
+
+template <typename T, int D>
+struct DivergenceTerm {  // sum_b m_b (v_a - v_b) . grad_a W_ab
+  static constexpr int width = 1, fields = 1 + D;
+  const T *m, *v;
+  void load(int64_t b, T* into, int64_t stride) const {
+    into[0] = m[b];
+    for (int i = 0; i < D; i++) into[(1 + i) * stride] = v[b * D + i];
+  }
+  Own<T, D> row(int64_t a) const {
+    Own<T, D> o{m[a], T(0), {}};
+    for (int i = 0; i < D; i++) o.v[i] = v[a * D + i];
+    return o;
+  }
+  void pair(const Own<T, D>& o, const Pair<T, D>& p, const T* from, int64_t stride, T* on_a,
+            T* on_b) const {
+    T flux = T(0);
+    for (int i = 0; i < D; i++) flux += (o.v[i] - from[(1 + i) * stride]) * p.grad[i];
+    on_a[0] = from[0] * flux;
+    on_b[0] = o.m * flux;
+  }
+};
+
+struct DiffusionParameters {
+  double gravity[3], reference_density, sound_speed, delta;
+};
+
+// eq. 11 with Molteni & Colagrossi's density diffusion, the hydrostatic part of the
+// density difference removed: per pair m_b v_ab . grad_a W + delta h c0 2 (rho_a - rho_b -
+// rho0 g . r_ab / c0^2) (r_ab . grad_a W) / (r_ab^2 + 0.01 h^2) m_b / rho_b, and for b the
+// same with a and b swapped (r_ba = -r_ab, grad_b W_ba = -grad_a W_ab)
+template <typename T, int D>
+struct MolteniTerm {
+  static constexpr int width = 1, fields = 2 + D;
+  const T *m, *v, *rho;
+  T hydrostatic[D], diffusion, eta2;
+  void load(int64_t b, T* into, int64_t stride) const {
+    into[0] = m[b];
+    into[stride] = rho[b];
+    for (int i = 0; i < D; i++) into[(2 + i) * stride] = v[b * D + i];
+  }
+  Own<T, D> row(int64_t a) const {
+    Own<T, D> o{m[a], rho[a], {}};
+    for (int i = 0; i < D; i++) o.v[i] = v[a * D + i];
+    return o;
+  }
+  void pair(const Own<T, D>& o, const Pair<T, D>& p, const T* from, int64_t stride, T* on_a,
+            T* on_b) const {
+    const T m_b = from[0], rho_b = from[stride];
+    T flux = T(0), along = T(0), drho = o.rho - rho_b;
+    for (int i = 0; i < D; i++) {
+      flux += (o.v[i] - from[(2 + i) * stride]) * p.grad[i];
+      along += p.dr[i] * p.grad[i];
+      drho -= hydrostatic[i] * p.dr[i];
+    }
+    const T spread = diffusion * T(2) * drho * along / (p.r2 + eta2);
+    on_a[0] = m_b * flux + spread * (m_b / rho_b);
+    on_b[0] = o.m * flux - spread * (o.m / o.rho);
+  }
+};
+
+struct MomentumParameters {
+  double sound_speed, alpha, beta, nu;
+  bool artificial, morris;
+};
+
+template <typename T, int D>
+struct OwnMomentum {
+  T m, rho, P, inv, v[D];
+};
+
+// eq. 10 per pair: -(P_a + P_b + Pi_ab) grad_a W + Morris, times m_b for a and -m_a for b
+// (antisymmetric); P = p / rho^2; the viscosities' switches are factors 0 or 1
+template <typename T, int D>
+struct MomentumTerm {
+  static constexpr int width = D, fields = 4 + D;
+  const T *m, *v, *rho, *P, *inv;
+  T h, c0, alpha, beta, nu, artificial, morris, eta2;
+  void load(int64_t b, T* into, int64_t stride) const {
+    into[0] = m[b];
+    into[stride] = rho[b];
+    into[2 * stride] = P[b];
+    into[3 * stride] = inv[b];
+    for (int i = 0; i < D; i++) into[(4 + i) * stride] = v[b * D + i];
+  }
+  OwnMomentum<T, D> row(int64_t a) const {
+    OwnMomentum<T, D> o{m[a], rho[a], P[a], inv[a], {}};
+    for (int i = 0; i < D; i++) o.v[i] = v[a * D + i];
+    return o;
+  }
+  void pair(const OwnMomentum<T, D>& o, const Pair<T, D>& p, const T* from, int64_t stride,
+            T* on_a, T* on_b) const {
+    const T m_b = from[0], rho_b = from[stride], P_b = from[2 * stride], inv_b = from[3 * stride];
+    T v_ab[D], vr = T(0), along = T(0);
+    for (int i = 0; i < D; i++) {
+      v_ab[i] = o.v[i] - from[(4 + i) * stride];
+      vr += v_ab[i] * p.dr[i];
+      along += p.dr[i] * p.grad[i];
+    }
+    const T inverse_denominator = T(1) / (p.r2 + eta2);
+    const T mu = h * vr * inverse_denominator;
+    const T pi = (-alpha * c0 * mu + beta * mu * mu) / (T(0.5) * (o.rho + rho_b));
+    const T term = o.P + P_b + (vr < T(0) ? artificial * pi : T(0));
+    const T factor = morris * nu * (o.inv + inv_b) * along * inverse_denominator;
+    for (int i = 0; i < D; i++) {
+      const T f = -term * p.grad[i] + factor * v_ab[i];
+      on_a[i] = m_b * f;
+      on_b[i] = -o.m * f;
+    }
+  }
+};
+
+template <typename T, int D>
+void kernel_sum(const Setting<T>& s, int kernel, const T* x, const T* m, const int32_t* idx,
+                int64_t n, int64_t k, T* out) {
+  by_kernel<T, D>(kernel, s, x, idx, n, k, out, KernelSumTerm<T, D>{m});
+}
+
+template <typename T, int D>
+void velocity_divergence(const Setting<T>& s, int kernel, const T* x, const T* v, const T* m,
+                         const int32_t* idx, int64_t n, int64_t k, T* out) {
+  by_kernel<T, D>(kernel, s, x, idx, n, k, out, DivergenceTerm<T, D>{m, v});
+}
+
+template <typename T, int D>
+void continuity_molteni(const Setting<T>& s, int kernel, const DiffusionParameters& dp,
+                        const T* x, const T* v, const T* m, const T* rho, const int32_t* idx,
+                        int64_t n, int64_t k, T* out) {
+  MolteniTerm<T, D> term{m, v, rho, {}, T(0), T(kEta2) * s.h * s.h};
+  const T c0 = T(dp.sound_speed);
+  term.diffusion = T(dp.delta) * s.h * c0;
+  for (int i = 0; i < D; i++) term.hydrostatic[i] = T(dp.reference_density * dp.gravity[i]) / (c0 * c0);
+  by_kernel<T, D>(kernel, s, x, idx, n, k, out, term);
+}
+
+template <typename T, int D>
+void momentum(const Setting<T>& s, int kernel, const MomentumParameters& mp, const T* x,
+              const T* v, const T* m, const T* rho, const T* pressure, const int32_t* idx,
+              int64_t n, int64_t k, T* out) {
+  std::vector<T> coefficient(n), inverse(n);  // P = p / rho^2, 1 / rho
+  for (int64_t a = 0; a < n; a++) {
+    inverse[a] = T(1) / rho[a];
+    coefficient[a] = pressure[a] * (inverse[a] * inverse[a]);
+  }
+  MomentumTerm<T, D> term{m,
+                      v,
+                      rho,
+                      coefficient.data(),
+                      inverse.data(),
+                      s.h,
+                      T(mp.sound_speed),
+                      T(mp.alpha),
+                      T(mp.beta),
+                      T(mp.nu),
+                      mp.artificial ? T(1) : T(0),
+                      mp.morris ? T(1) : T(0),
+                      T(kEta2) * s.h * s.h};
+  by_kernel<T, D>(kernel, s, x, idx, n, k, out, term);
+}
+
+// ------------------------------------------------------------------ FFI handlers
+
+template <typename T>
+const T* data(const ffi::AnyBuffer& buffer) {
+  return reinterpret_cast<const T*>(buffer.untyped_data());
+}
+
+template <typename T>
+T* data(ffi::Result<ffi::AnyBuffer>& buffer) {
+  return reinterpret_cast<T*>(buffer->untyped_data());
+}
+
+template <typename T>
+T scalar(const ffi::AnyBuffer& buffer) {
+  return *data<T>(buffer);
+}
+
+ffi::Error check(const ffi::AnyBuffer& x, const ffi::Buffer<ffi::S32>& idx) {
+  auto xd = x.dimensions();
+  if (xd.size() != 2 || (xd[1] != 2 && xd[1] != 3))
+    return ffi::Error::InvalidArgument("positions must be [N, 2] or [N, 3]");
+  if (x.element_type() != ffi::F32 && x.element_type() != ffi::F64)
+    return ffi::Error::InvalidArgument("positions must be float32 or float64");
+  if (idx.dimensions().size() != 2 || idx.dimensions()[0] != xd[0])
+    return ffi::Error::InvalidArgument("the neighbour list must be [N, K]");
+  return ffi::Error::Success();
+}
+
+#define SPHJAX_SETTING_ATTRS                                                        \
+  int64_t kernel, double h, double cutoff, double sigma, double lx, double ly, double lz, \
+      int64_t periodic
+
+#define SPHJAX_BIND_SETTING(binding)                                                    \
+  binding.Attr<int64_t>("kernel")                                                       \
+      .Attr<double>("h")                                                                \
+      .Attr<double>("cutoff")                                                           \
+      .Attr<double>("sigma")                                                            \
+      .Attr<double>("lx")                                                               \
+      .Attr<double>("ly")                                                               \
+      .Attr<double>("lz")                                                               \
+      .Attr<int64_t>("periodic")
+
+// Dispatch on the element type and the dimension: body<T, D>() for the call's.
+template <template <typename, int> class Body, typename... Args>
+ffi::Error dispatch(const ffi::AnyBuffer& x, Args&&... args) {
+  const bool single = x.element_type() == ffi::F32;
+  const int64_t dim = x.dimensions()[1];
+  if (single && dim == 2) Body<float, 2>::run(args...);
+  if (single && dim == 3) Body<float, 3>::run(args...);
+  if (!single && dim == 2) Body<double, 2>::run(args...);
+  if (!single && dim == 3) Body<double, 3>::run(args...);
+  return ffi::Error::Success();
+}
+
+struct Call {
+  int64_t kernel, n, k;
+  double h, cutoff, sigma, lx, ly, lz;
+  int64_t periodic;
+  int dim;
+  template <typename T>
+  Setting<T> geometry() const {
+    return setting<T>(dim, h, cutoff, sigma, lx, ly, lz, periodic);
+  }
+};
+
+template <typename T, int D>
+struct KernelSumBody {
+  static void run(const Call& c, const ffi::AnyBuffer& x, const ffi::AnyBuffer& m,
+                  const int32_t* idx, ffi::Result<ffi::AnyBuffer>& out) {
+    kernel_sum<T, D>(c.geometry<T>(), c.kernel, data<T>(x), data<T>(m), idx, c.n, c.k,
+                     data<T>(out));
+  }
+};
+
+template <typename T, int D>
+struct DivergenceBody {
+  static void run(const Call& c, const ffi::AnyBuffer& x, const ffi::AnyBuffer& v,
+                  const ffi::AnyBuffer& m, const int32_t* idx, ffi::Result<ffi::AnyBuffer>& out) {
+    velocity_divergence<T, D>(c.geometry<T>(), c.kernel, data<T>(x), data<T>(v), data<T>(m), idx,
+                              c.n, c.k, data<T>(out));
+  }
+};
+
+template <typename T, int D>
+struct MolteniBody {
+  static void run(const Call& c, const DiffusionParameters& dp, const ffi::AnyBuffer& x,
+                  const ffi::AnyBuffer& v, const ffi::AnyBuffer& m, const ffi::AnyBuffer& rho,
+                  const int32_t* idx, ffi::Result<ffi::AnyBuffer>& out) {
+    continuity_molteni<T, D>(c.geometry<T>(), c.kernel, dp, data<T>(x), data<T>(v), data<T>(m),
+                             data<T>(rho), idx, c.n, c.k, data<T>(out));
+  }
+};
+
+template <typename T, int D>
+struct MomentumBody {
+  static void run(const Call& c, const MomentumParameters& mp, const ffi::AnyBuffer& x,
+                  const ffi::AnyBuffer& v, const ffi::AnyBuffer& m, const ffi::AnyBuffer& rho,
+                  const ffi::AnyBuffer& p, const int32_t* idx, ffi::Result<ffi::AnyBuffer>& out) {
+    momentum<T, D>(c.geometry<T>(), c.kernel, mp, data<T>(x), data<T>(v), data<T>(m),
+                   data<T>(rho), data<T>(p), idx, c.n, c.k, data<T>(out));
+  }
+};
+
+Call call_of(const ffi::AnyBuffer& x, const ffi::Buffer<ffi::S32>& idx, SPHJAX_SETTING_ATTRS) {
+  return Call{kernel,     x.dimensions()[0], idx.dimensions()[1], h, cutoff, sigma, lx, ly, lz,
+              periodic,   static_cast<int>(x.dimensions()[1])};
+}
+
+ffi::Error KernelSum(ffi::AnyBuffer x, ffi::AnyBuffer m, ffi::Buffer<ffi::S32> idx,
+                     ffi::Result<ffi::AnyBuffer> out, SPHJAX_SETTING_ATTRS) {
+  if (auto e = check(x, idx); e.failure()) return e;
+  Call c = call_of(x, idx, kernel, h, cutoff, sigma, lx, ly, lz, periodic);
+  return dispatch<KernelSumBody>(x, c, x, m, idx.typed_data(), out);
+}
+
+ffi::Error VelocityDivergence(ffi::AnyBuffer x, ffi::AnyBuffer v, ffi::AnyBuffer m,
+                              ffi::Buffer<ffi::S32> idx, ffi::Result<ffi::AnyBuffer> out,
+                              SPHJAX_SETTING_ATTRS) {
+  if (auto e = check(x, idx); e.failure()) return e;
+  Call c = call_of(x, idx, kernel, h, cutoff, sigma, lx, ly, lz, periodic);
+  return dispatch<DivergenceBody>(x, c, x, v, m, idx.typed_data(), out);
+}
+
+ffi::Error ContinuityMolteni(ffi::AnyBuffer x, ffi::AnyBuffer v, ffi::AnyBuffer m,
+                             ffi::AnyBuffer rho, ffi::Buffer<ffi::S32> idx, ffi::AnyBuffer gravity,
+                             ffi::AnyBuffer reference_density, ffi::AnyBuffer sound_speed,
+                             ffi::AnyBuffer delta, ffi::Result<ffi::AnyBuffer> out,
+                             SPHJAX_SETTING_ATTRS) {
+  if (auto e = check(x, idx); e.failure()) return e;
+  Call c = call_of(x, idx, kernel, h, cutoff, sigma, lx, ly, lz, periodic);
+  const bool single = x.element_type() == ffi::F32;
+  auto value = [single](const ffi::AnyBuffer& b, int i) {
+    return single ? double(data<float>(b)[i]) : data<double>(b)[i];
+  };
+  DiffusionParameters dp{{0.0, 0.0, 0.0}, value(reference_density, 0), value(sound_speed, 0),
+                         value(delta, 0)};
+  for (int i = 0; i < c.dim; i++) dp.gravity[i] = value(gravity, i);
+  return dispatch<MolteniBody>(x, c, dp, x, v, m, rho, idx.typed_data(), out);
+}
+
+ffi::Error Momentum(ffi::AnyBuffer x, ffi::AnyBuffer v, ffi::AnyBuffer m, ffi::AnyBuffer rho,
+                    ffi::AnyBuffer p, ffi::Buffer<ffi::S32> idx, ffi::AnyBuffer sound_speed,
+                    ffi::AnyBuffer alpha, ffi::AnyBuffer beta, ffi::AnyBuffer nu,
+                    ffi::Result<ffi::AnyBuffer> out, SPHJAX_SETTING_ATTRS, bool artificial,
+                    bool morris) {
+  if (auto e = check(x, idx); e.failure()) return e;
+  Call c = call_of(x, idx, kernel, h, cutoff, sigma, lx, ly, lz, periodic);
+  const bool single = x.element_type() == ffi::F32;
+  auto value = [single](const ffi::AnyBuffer& b) {
+    return single ? double(scalar<float>(b)) : scalar<double>(b);
+  };
+  MomentumParameters mp{value(sound_speed), value(alpha), value(beta), value(nu), artificial,
+                        morris};
+  return dispatch<MomentumBody>(x, c, mp, x, v, m, rho, p, idx.typed_data(), out);
+}
+
+}  // namespace
+
+XLA_FFI_DEFINE_HANDLER_SYMBOL(SphjaxKernelSum, KernelSum,
+                              SPHJAX_BIND_SETTING(ffi::Ffi::Bind()
+                                                      .Arg<ffi::AnyBuffer>()
+                                                      .Arg<ffi::AnyBuffer>()
+                                                      .Arg<ffi::Buffer<ffi::S32>>()
+                                                      .Ret<ffi::AnyBuffer>()));
+
+XLA_FFI_DEFINE_HANDLER_SYMBOL(SphjaxVelocityDivergence, VelocityDivergence,
+                              SPHJAX_BIND_SETTING(ffi::Ffi::Bind()
+                                                      .Arg<ffi::AnyBuffer>()
+                                                      .Arg<ffi::AnyBuffer>()
+                                                      .Arg<ffi::AnyBuffer>()
+                                                      .Arg<ffi::Buffer<ffi::S32>>()
+                                                      .Ret<ffi::AnyBuffer>()));
+
+XLA_FFI_DEFINE_HANDLER_SYMBOL(SphjaxMomentum, Momentum,
+                              SPHJAX_BIND_SETTING(ffi::Ffi::Bind()
+                                                      .Arg<ffi::AnyBuffer>()
+                                                      .Arg<ffi::AnyBuffer>()
+                                                      .Arg<ffi::AnyBuffer>()
+                                                      .Arg<ffi::AnyBuffer>()
+                                                      .Arg<ffi::AnyBuffer>()
+                                                      .Arg<ffi::Buffer<ffi::S32>>()
+                                                      .Arg<ffi::AnyBuffer>()
+                                                      .Arg<ffi::AnyBuffer>()
+                                                      .Arg<ffi::AnyBuffer>()
+                                                      .Arg<ffi::AnyBuffer>()
+                                                      .Ret<ffi::AnyBuffer>())
+                                  .Attr<bool>("artificial")
+                                  .Attr<bool>("morris"));
+
+XLA_FFI_DEFINE_HANDLER_SYMBOL(SphjaxContinuityMolteni, ContinuityMolteni,
+                              SPHJAX_BIND_SETTING(ffi::Ffi::Bind()
+                                                      .Arg<ffi::AnyBuffer>()
+                                                      .Arg<ffi::AnyBuffer>()
+                                                      .Arg<ffi::AnyBuffer>()
+                                                      .Arg<ffi::AnyBuffer>()
+                                                      .Arg<ffi::Buffer<ffi::S32>>()
+                                                      .Arg<ffi::AnyBuffer>()
+                                                      .Arg<ffi::AnyBuffer>()
+                                                      .Arg<ffi::AnyBuffer>()
+                                                      .Arg<ffi::AnyBuffer>()
+                                                      .Ret<ffi::AnyBuffer>()));
