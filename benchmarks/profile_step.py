@@ -4,7 +4,8 @@
     python benchmarks/profile_step.py --case dam_break --n 80
     python benchmarks/profile_step.py --case oscillating_plate --n 32
 
-For one case (float32) this times, as separately compiled functions on the case's state
+For one case (float32; ``--pair-loop native``: with the compiled loops of
+``Model.pair_loop``) this times, as separately compiled functions on the case's state
 (best of ``--repeat``, wall-clock and CPU seconds of this process):
 
 * ``step``: one kick-drift-kick step with its neighbour update, averaged over a
@@ -25,6 +26,7 @@ A benchmark reports; it asserts nothing.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import time
 
 import jax
@@ -38,17 +40,20 @@ from sphjax.physics.pairs import Geometry
 from sphjax.physics.rhs import build_neighbors
 
 
-def make_case(name: str, n: int):
+def make_case(name: str, n: int, pair_loop: str = "xla"):
     if name == "taylor_green":
-        return sphjax.cases.taylor_green(
+        case = sphjax.cases.taylor_green(
             n=n,
             kernel="quintic_spline",
             h_factor=1.0,
             density="summation",
             transport_velocity=False,
-        ), 0.25 / n / 11.0
-    case = getattr(sphjax.cases, name)(n=n)
-    return case, case.dt
+        )
+        dt = 0.25 / n / 11.0
+    else:
+        case = getattr(sphjax.cases, name)(n=n)
+        dt = case.dt
+    return case.replace(model=dataclasses.replace(case.model, pair_loop=pair_loop)), dt
 
 
 def timed(fn, *args, repeat=3):
@@ -62,8 +67,8 @@ def timed(fn, *args, repeat=3):
     return min(wall), min(cpu)
 
 
-def profile(name: str, n: int, steps: int, repeat: int) -> dict:
-    case, dt = make_case(name, n)
+def profile(name: str, n: int, steps: int, repeat: int, pair_loop: str = "xla") -> dict:
+    case, dt = make_case(name, n, pair_loop)
     model, params = case.model, case.params
     neighbors = build_neighbors(case.state, model, compact_rows=True)
     state = jax.jit(rhs.evaluate, static_argnames="model")(case.state, neighbors, model, params)
@@ -157,8 +162,11 @@ def main(argv=None):
     parser.add_argument("--n", type=int, default=200)
     parser.add_argument("--steps", type=int, default=50)
     parser.add_argument("--repeat", type=int, default=3)
+    parser.add_argument(
+        "--pair-loop", choices=("xla", "native"), default="xla", help="Model.pair_loop"
+    )
     args = parser.parse_args(argv)
-    out = profile(args.case, args.n, args.steps, args.repeat)
+    out = profile(args.case, args.n, args.steps, args.repeat, args.pair_loop)
     print(
         f"{args.case} n={args.n}: {out['particles']} particles, lists {out['lists']}, "
         f"{out['rebuilds']} rebuilds in {out['steps']} steps"

@@ -25,10 +25,11 @@
 // with the minimum image on periodic axes, pairs with |r_ab| >= cutoff left out, W and
 // grad_a W = W'(r) / r r_ab of the kernel (0 at r = 0).
 #include <algorithm>
+#include <condition_variable>
+#include <mutex>
 #include <cmath>
 #include <cstdint>
 #include <cstdlib>
-#include <thread>
 #include <vector>
 
 #include "xla/ffi/api/ffi.h"
@@ -122,17 +123,38 @@ struct Pair {
 // one after.  Pairs outside the support have W = grad W = 0, so every term is 0 there and
 // the loop has no branch.  Threads take equal ranges of rows, each with its own output
 // copy.
+// Run body(t) for t < threads: t = 0 on the calling thread, the others on XLA's own CPU
+// thread pool (whose threads would otherwise spin beside ours), and wait for them.
+template <typename Body>
+void in_parallel(ffi::ThreadPool* pool, int64_t threads, Body body) {
+  std::mutex mutex;
+  std::condition_variable done;
+  int64_t remaining = threads - 1;
+  for (int64_t t = 1; t < threads; t++)
+    pool->Schedule([&, t] {
+      body(t);
+      std::lock_guard<std::mutex> lock(mutex);
+      if (--remaining == 0) done.notify_one();
+    });
+  body(0);
+  std::unique_lock<std::mutex> lock(mutex);
+  done.wait(lock, [&] { return remaining == 0; });
+}
+
+// How many threads share the rows: XLA's pool's size (at most $SPHJAX_NATIVE_THREADS),
+// one per 1024 rows at least.
+inline int64_t thread_count(ffi::ThreadPool* pool, int64_t n) {
+  int64_t threads = pool == nullptr ? 1 : std::max<int64_t>(1, pool->num_threads());
+  if (const char* env = std::getenv("SPHJAX_NATIVE_THREADS"))
+    threads = std::min<int64_t>(threads, std::max<int64_t>(1, std::atoll(env)));
+  return std::min<int64_t>(threads, std::max<int64_t>(1, n / 1024));
+}
+
 template <typename T, int D, int Kernel, typename Term>
-void each_pair_once(const Setting<T>& s, const T* x, const int32_t* idx, int64_t n, int64_t k,
-                    T* out, const Term& term) {
+void each_pair_once(ffi::ThreadPool* pool, const Setting<T>& s, const T* x, const int32_t* idx,
+                    int64_t n, int64_t k, T* out, const Term& term) {
   constexpr int W = Term::width, F = Term::fields;
-  int64_t threads = 1;
-  if (const char* env = std::getenv("SPHJAX_NATIVE_THREADS")) {
-    threads = std::max<int64_t>(1, std::atoll(env));
-  } else {
-    threads = std::max<int64_t>(1, std::thread::hardware_concurrency());
-  }
-  threads = std::min<int64_t>(threads, std::max<int64_t>(1, n / 1024));
+  const int64_t threads = thread_count(pool, n);
   std::vector<std::vector<T>> copies(threads - 1, std::vector<T>(n * W, T(0)));
   std::fill(out, out + n * W, T(0));
   auto rows = [&](int64_t t) {
@@ -194,22 +216,19 @@ void each_pair_once(const Setting<T>& s, const T* x, const int32_t* idx, int64_t
         for (int w = 0; w < W; w++) acc[later[j] * W + w] += ob[w * k + j];
     }
   };
-  std::vector<std::thread> workers;
-  for (int64_t t = 1; t < threads; t++) workers.emplace_back(rows, t);
-  rows(0);
-  for (auto& w : workers) w.join();
+  in_parallel(pool, threads, rows);
   for (const auto& copy : copies)
     for (int64_t i = 0; i < n * W; i++) out[i] += copy[i];
 }
 
 template <typename T, int D, typename Term>
-void by_kernel(int kernel, const Setting<T>& s, const T* x, const int32_t* idx, int64_t n,
-               int64_t k, T* out, const Term& term) {
+void by_kernel(ffi::ThreadPool* pool, int kernel, const Setting<T>& s, const T* x,
+               const int32_t* idx, int64_t n, int64_t k, T* out, const Term& term) {
   switch (kernel) {
-    case 0: return each_pair_once<T, D, 0>(s, x, idx, n, k, out, term);
-    case 1: return each_pair_once<T, D, 1>(s, x, idx, n, k, out, term);
-    case 2: return each_pair_once<T, D, 2>(s, x, idx, n, k, out, term);
-    default: return each_pair_once<T, D, 3>(s, x, idx, n, k, out, term);
+    case 0: return each_pair_once<T, D, 0>(pool, s, x, idx, n, k, out, term);
+    case 1: return each_pair_once<T, D, 1>(pool, s, x, idx, n, k, out, term);
+    case 2: return each_pair_once<T, D, 2>(pool, s, x, idx, n, k, out, term);
+    default: return each_pair_once<T, D, 3>(pool, s, x, idx, n, k, out, term);
   }
 }
 
@@ -366,30 +385,30 @@ struct MomentumTerm {
 };
 
 template <typename T, int D>
-void kernel_sum(const Setting<T>& s, int kernel, const T* x, const T* m, const int32_t* idx,
+void kernel_sum(ffi::ThreadPool* pool, const Setting<T>& s, int kernel, const T* x, const T* m, const int32_t* idx,
                 int64_t n, int64_t k, T* out) {
-  by_kernel<T, D>(kernel, s, x, idx, n, k, out, KernelSumTerm<T, D>{m});
+  by_kernel<T, D>(pool, kernel, s, x, idx, n, k, out, KernelSumTerm<T, D>{m});
 }
 
 template <typename T, int D>
-void velocity_divergence(const Setting<T>& s, int kernel, const T* x, const T* v, const T* m,
+void velocity_divergence(ffi::ThreadPool* pool, const Setting<T>& s, int kernel, const T* x, const T* v, const T* m,
                          const int32_t* idx, int64_t n, int64_t k, T* out) {
-  by_kernel<T, D>(kernel, s, x, idx, n, k, out, DivergenceTerm<T, D>{m, v});
+  by_kernel<T, D>(pool, kernel, s, x, idx, n, k, out, DivergenceTerm<T, D>{m, v});
 }
 
 template <typename T, int D>
-void continuity_molteni(const Setting<T>& s, int kernel, const DiffusionParameters& dp,
+void continuity_molteni(ffi::ThreadPool* pool, const Setting<T>& s, int kernel, const DiffusionParameters& dp,
                         const T* x, const T* v, const T* m, const T* rho, const int32_t* idx,
                         int64_t n, int64_t k, T* out) {
   MolteniTerm<T, D> term{m, v, rho, {}, T(0), T(kEta2) * s.h * s.h};
   const T c0 = T(dp.sound_speed);
   term.diffusion = T(dp.delta) * s.h * c0;
   for (int i = 0; i < D; i++) term.hydrostatic[i] = T(dp.reference_density * dp.gravity[i]) / (c0 * c0);
-  by_kernel<T, D>(kernel, s, x, idx, n, k, out, term);
+  by_kernel<T, D>(pool, kernel, s, x, idx, n, k, out, term);
 }
 
 template <typename T, int D>
-void momentum(const Setting<T>& s, int kernel, const MomentumParameters& mp, const T* x,
+void momentum(ffi::ThreadPool* pool, const Setting<T>& s, int kernel, const MomentumParameters& mp, const T* x,
               const T* v, const T* m, const T* rho, const T* pressure, const int32_t* idx,
               int64_t n, int64_t k, T* out) {
   std::vector<T> coefficient(n), inverse(n);  // P = p / rho^2, 1 / rho
@@ -410,7 +429,7 @@ void momentum(const Setting<T>& s, int kernel, const MomentumParameters& mp, con
                       mp.artificial ? T(1) : T(0),
                       mp.morris ? T(1) : T(0),
                       T(kEta2) * s.h * s.h};
-  by_kernel<T, D>(kernel, s, x, idx, n, k, out, term);
+  by_kernel<T, D>(pool, kernel, s, x, idx, n, k, out, term);
 }
 
 // ------------------------------------------------------------------ FFI handlers
@@ -468,6 +487,7 @@ ffi::Error dispatch(const ffi::AnyBuffer& x, Args&&... args) {
 }
 
 struct Call {
+  ffi::ThreadPool* pool;
   int64_t kernel, n, k;
   double h, cutoff, sigma, lx, ly, lz;
   int64_t periodic;
@@ -482,7 +502,7 @@ template <typename T, int D>
 struct KernelSumBody {
   static void run(const Call& c, const ffi::AnyBuffer& x, const ffi::AnyBuffer& m,
                   const int32_t* idx, ffi::Result<ffi::AnyBuffer>& out) {
-    kernel_sum<T, D>(c.geometry<T>(), c.kernel, data<T>(x), data<T>(m), idx, c.n, c.k,
+    kernel_sum<T, D>(c.pool, c.geometry<T>(), c.kernel, data<T>(x), data<T>(m), idx, c.n, c.k,
                      data<T>(out));
   }
 };
@@ -491,7 +511,7 @@ template <typename T, int D>
 struct DivergenceBody {
   static void run(const Call& c, const ffi::AnyBuffer& x, const ffi::AnyBuffer& v,
                   const ffi::AnyBuffer& m, const int32_t* idx, ffi::Result<ffi::AnyBuffer>& out) {
-    velocity_divergence<T, D>(c.geometry<T>(), c.kernel, data<T>(x), data<T>(v), data<T>(m), idx,
+    velocity_divergence<T, D>(c.pool, c.geometry<T>(), c.kernel, data<T>(x), data<T>(v), data<T>(m), idx,
                               c.n, c.k, data<T>(out));
   }
 };
@@ -501,7 +521,7 @@ struct MolteniBody {
   static void run(const Call& c, const DiffusionParameters& dp, const ffi::AnyBuffer& x,
                   const ffi::AnyBuffer& v, const ffi::AnyBuffer& m, const ffi::AnyBuffer& rho,
                   const int32_t* idx, ffi::Result<ffi::AnyBuffer>& out) {
-    continuity_molteni<T, D>(c.geometry<T>(), c.kernel, dp, data<T>(x), data<T>(v), data<T>(m),
+    continuity_molteni<T, D>(c.pool, c.geometry<T>(), c.kernel, dp, data<T>(x), data<T>(v), data<T>(m),
                              data<T>(rho), idx, c.n, c.k, data<T>(out));
   }
 };
@@ -511,38 +531,40 @@ struct MomentumBody {
   static void run(const Call& c, const MomentumParameters& mp, const ffi::AnyBuffer& x,
                   const ffi::AnyBuffer& v, const ffi::AnyBuffer& m, const ffi::AnyBuffer& rho,
                   const ffi::AnyBuffer& p, const int32_t* idx, ffi::Result<ffi::AnyBuffer>& out) {
-    momentum<T, D>(c.geometry<T>(), c.kernel, mp, data<T>(x), data<T>(v), data<T>(m),
+    momentum<T, D>(c.pool, c.geometry<T>(), c.kernel, mp, data<T>(x), data<T>(v), data<T>(m),
                    data<T>(rho), data<T>(p), idx, c.n, c.k, data<T>(out));
   }
 };
 
-Call call_of(const ffi::AnyBuffer& x, const ffi::Buffer<ffi::S32>& idx, SPHJAX_SETTING_ATTRS) {
-  return Call{kernel,     x.dimensions()[0], idx.dimensions()[1], h, cutoff, sigma, lx, ly, lz,
-              periodic,   static_cast<int>(x.dimensions()[1])};
+Call call_of(ffi::ThreadPool& pool, const ffi::AnyBuffer& x, const ffi::Buffer<ffi::S32>& idx,
+             SPHJAX_SETTING_ATTRS) {
+  return Call{&pool, kernel,   x.dimensions()[0], idx.dimensions()[1],
+              h,     cutoff,   sigma,             lx,
+              ly,    lz,       periodic,          static_cast<int>(x.dimensions()[1])};
 }
 
-ffi::Error KernelSum(ffi::AnyBuffer x, ffi::AnyBuffer m, ffi::Buffer<ffi::S32> idx,
+ffi::Error KernelSum(ffi::ThreadPool pool, ffi::AnyBuffer x, ffi::AnyBuffer m, ffi::Buffer<ffi::S32> idx,
                      ffi::Result<ffi::AnyBuffer> out, SPHJAX_SETTING_ATTRS) {
   if (auto e = check(x, idx); e.failure()) return e;
-  Call c = call_of(x, idx, kernel, h, cutoff, sigma, lx, ly, lz, periodic);
+  Call c = call_of(pool, x, idx, kernel, h, cutoff, sigma, lx, ly, lz, periodic);
   return dispatch<KernelSumBody>(x, c, x, m, idx.typed_data(), out);
 }
 
-ffi::Error VelocityDivergence(ffi::AnyBuffer x, ffi::AnyBuffer v, ffi::AnyBuffer m,
+ffi::Error VelocityDivergence(ffi::ThreadPool pool, ffi::AnyBuffer x, ffi::AnyBuffer v, ffi::AnyBuffer m,
                               ffi::Buffer<ffi::S32> idx, ffi::Result<ffi::AnyBuffer> out,
                               SPHJAX_SETTING_ATTRS) {
   if (auto e = check(x, idx); e.failure()) return e;
-  Call c = call_of(x, idx, kernel, h, cutoff, sigma, lx, ly, lz, periodic);
+  Call c = call_of(pool, x, idx, kernel, h, cutoff, sigma, lx, ly, lz, periodic);
   return dispatch<DivergenceBody>(x, c, x, v, m, idx.typed_data(), out);
 }
 
-ffi::Error ContinuityMolteni(ffi::AnyBuffer x, ffi::AnyBuffer v, ffi::AnyBuffer m,
+ffi::Error ContinuityMolteni(ffi::ThreadPool pool, ffi::AnyBuffer x, ffi::AnyBuffer v, ffi::AnyBuffer m,
                              ffi::AnyBuffer rho, ffi::Buffer<ffi::S32> idx, ffi::AnyBuffer gravity,
                              ffi::AnyBuffer reference_density, ffi::AnyBuffer sound_speed,
                              ffi::AnyBuffer delta, ffi::Result<ffi::AnyBuffer> out,
                              SPHJAX_SETTING_ATTRS) {
   if (auto e = check(x, idx); e.failure()) return e;
-  Call c = call_of(x, idx, kernel, h, cutoff, sigma, lx, ly, lz, periodic);
+  Call c = call_of(pool, x, idx, kernel, h, cutoff, sigma, lx, ly, lz, periodic);
   const bool single = x.element_type() == ffi::F32;
   auto value = [single](const ffi::AnyBuffer& b, int i) {
     return single ? double(data<float>(b)[i]) : data<double>(b)[i];
@@ -553,13 +575,13 @@ ffi::Error ContinuityMolteni(ffi::AnyBuffer x, ffi::AnyBuffer v, ffi::AnyBuffer 
   return dispatch<MolteniBody>(x, c, dp, x, v, m, rho, idx.typed_data(), out);
 }
 
-ffi::Error Momentum(ffi::AnyBuffer x, ffi::AnyBuffer v, ffi::AnyBuffer m, ffi::AnyBuffer rho,
+ffi::Error Momentum(ffi::ThreadPool pool, ffi::AnyBuffer x, ffi::AnyBuffer v, ffi::AnyBuffer m, ffi::AnyBuffer rho,
                     ffi::AnyBuffer p, ffi::Buffer<ffi::S32> idx, ffi::AnyBuffer sound_speed,
                     ffi::AnyBuffer alpha, ffi::AnyBuffer beta, ffi::AnyBuffer nu,
                     ffi::Result<ffi::AnyBuffer> out, SPHJAX_SETTING_ATTRS, bool artificial,
                     bool morris) {
   if (auto e = check(x, idx); e.failure()) return e;
-  Call c = call_of(x, idx, kernel, h, cutoff, sigma, lx, ly, lz, periodic);
+  Call c = call_of(pool, x, idx, kernel, h, cutoff, sigma, lx, ly, lz, periodic);
   const bool single = x.element_type() == ffi::F32;
   auto value = [single](const ffi::AnyBuffer& b) {
     return single ? double(scalar<float>(b)) : scalar<double>(b);
@@ -573,6 +595,7 @@ ffi::Error Momentum(ffi::AnyBuffer x, ffi::AnyBuffer v, ffi::AnyBuffer m, ffi::A
 
 XLA_FFI_DEFINE_HANDLER_SYMBOL(SphjaxKernelSum, KernelSum,
                               SPHJAX_BIND_SETTING(ffi::Ffi::Bind()
+                                                      .Ctx<ffi::ThreadPool>()
                                                       .Arg<ffi::AnyBuffer>()
                                                       .Arg<ffi::AnyBuffer>()
                                                       .Arg<ffi::Buffer<ffi::S32>>()
@@ -580,6 +603,7 @@ XLA_FFI_DEFINE_HANDLER_SYMBOL(SphjaxKernelSum, KernelSum,
 
 XLA_FFI_DEFINE_HANDLER_SYMBOL(SphjaxVelocityDivergence, VelocityDivergence,
                               SPHJAX_BIND_SETTING(ffi::Ffi::Bind()
+                                                      .Ctx<ffi::ThreadPool>()
                                                       .Arg<ffi::AnyBuffer>()
                                                       .Arg<ffi::AnyBuffer>()
                                                       .Arg<ffi::AnyBuffer>()
@@ -588,6 +612,7 @@ XLA_FFI_DEFINE_HANDLER_SYMBOL(SphjaxVelocityDivergence, VelocityDivergence,
 
 XLA_FFI_DEFINE_HANDLER_SYMBOL(SphjaxMomentum, Momentum,
                               SPHJAX_BIND_SETTING(ffi::Ffi::Bind()
+                                                      .Ctx<ffi::ThreadPool>()
                                                       .Arg<ffi::AnyBuffer>()
                                                       .Arg<ffi::AnyBuffer>()
                                                       .Arg<ffi::AnyBuffer>()
@@ -604,6 +629,7 @@ XLA_FFI_DEFINE_HANDLER_SYMBOL(SphjaxMomentum, Momentum,
 
 XLA_FFI_DEFINE_HANDLER_SYMBOL(SphjaxContinuityMolteni, ContinuityMolteni,
                               SPHJAX_BIND_SETTING(ffi::Ffi::Bind()
+                                                      .Ctx<ffi::ThreadPool>()
                                                       .Arg<ffi::AnyBuffer>()
                                                       .Arg<ffi::AnyBuffer>()
                                                       .Arg<ffi::AnyBuffer>()
