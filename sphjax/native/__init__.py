@@ -14,8 +14,9 @@ compiled step as XLA foreign functions (``jax.ffi``):
 * ``momentum``: eq. 10's pressure term with Monaghan's ``Pi_ab`` and Morris' viscosity.
 
 The library is built with the machine's C++ compiler (``$CXX``, else ``g++``, else
-``c++``) the first time a run needs it and kept in ``$SPHJAX_CACHE_DIR`` (default
-``~/.cache/sphjax``) under a name that changes with the source, the compiler and jaxlib.
+``c++``) the first time a run needs it and kept in ``$SPHJAX_NATIVE_DIR`` (default
+``~/.cache/sphjax/native``) under a name that changes with the source, the compiler,
+jaxlib and the CPU.
 Derivatives never go through it: :func:`sphjax.physics.pairs.pair_sum` gives the native
 sum XLA's sum as its derivative rule (``jax.custom_jvp``), so ``jax.grad``, ``jax.jvp``
 and the pair sums' custom adjoint see exactly the XLA path.
@@ -75,10 +76,14 @@ def compiler() -> str | None:
 
 
 def _cache_dir() -> Path:
-    root = os.environ.get("SPHJAX_CACHE_DIR") or os.path.join(
-        os.environ.get("XDG_CACHE_HOME") or os.path.expanduser("~/.cache"), "sphjax"
-    )
-    return Path(root) / "native"
+    """Where built libraries are kept: ``$SPHJAX_NATIVE_DIR``, else
+    ``$XDG_CACHE_HOME/sphjax/native`` (default ``~/.cache/sphjax/native``); apart from the
+    compiled-program cache of ``SPHJAX_CACHE_DIR``, which may be off: the loops are
+    needed to run."""
+    if os.environ.get("SPHJAX_NATIVE_DIR"):
+        return Path(os.environ["SPHJAX_NATIVE_DIR"])
+    root = os.environ.get("XDG_CACHE_HOME") or os.path.expanduser("~/.cache")
+    return Path(root) / "sphjax" / "native"
 
 
 def _cpu_model() -> str:
