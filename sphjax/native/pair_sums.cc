@@ -7,8 +7,8 @@
 //     out_a += w_b f(a, b),    out_b += parity w_a f(a, b)          (each pair a < b once)
 //
 // which halves the pair arithmetic of XLA's sum, which visits every pair from both
-// sides.  Threads take equal ranges of rows and add into their own copies of the
-// output, summed at the end (no two threads write one number).
+// sides.  The threads of XLA's CPU pool take equal ranges of rows and add into their own
+// copies of the output, summed at the end (no two threads write one number).
 //
 // Sums (one handler each, float32 or float64, 2 or 3 dimensions):
 //   sphjax_kernel_sum          sum_b m_b W_ab                          (eq. 5 without the
@@ -25,11 +25,11 @@
 // with the minimum image on periodic axes, pairs with |r_ab| >= cutoff left out, W and
 // grad_a W = W'(r) / r r_ab of the kernel (0 at r = 0).
 #include <algorithm>
-#include <condition_variable>
-#include <mutex>
 #include <cmath>
+#include <condition_variable>
 #include <cstdint>
 #include <cstdlib>
+#include <mutex>
 #include <vector>
 
 #include "xla/ffi/api/ffi.h"
