@@ -29,26 +29,34 @@ jax.config.update(
 )
 
 
-# The costliest test files (CPU seconds on a 2-core CI machine, largest first) are handed
-# to the workers first, so that no worker is left with a long file at the end; the other
-# files follow in their usual order.  Only the order changes, not what runs.  "here":
-# measured alone on a 2-core machine with an empty compile cache (pytest -n 0), 1.4 to 2.5
-# times less than CI's figures for the tests compared; the CI figures of those files are
-# estimated from that.
+# The costliest test files (seconds on a worker in the suite on a 2-core machine with an
+# empty compile cache, largest first) are handed to the workers first, so that no worker
+# is left with a long file at the end; the other files follow in their usual order.  Only
+# the order changes, not what runs.  pytest-xdist would otherwise hand out the files with
+# the most tests first (its loadscope reordering, switched off in pyproject.toml's addopts
+# by --no-loadscope-reorder): the notebooks, six tests, then started 16 minutes into a
+# 22-minute run.
 COSTLIEST_FIRST = (
-    "test_gradients.py",  # ~570 CPU-s
-    "test_notebooks.py",  # ~500
-    "test_fsi.py",  # ~380
-    "test_3d.py",  # ~260
-    "test_readme.py",  # ~210
-    "test_solid_validation.py",  # ~170
-    "test_validation_fluid.py",  # ~165 (63 s here, its dam break's 29 s now 20)
-    "test_fluid_unit.py",  # ~160
-    "test_rigid.py",  # ~150 (93 s here; 194 s before its runs were compiled whole)
-    "test_diffrax.py",  # ~150 (84 s here)
-    "test_solver_in_the_loop.py",  # ~115
-    "test_calibrate.py",  # ~110 (the gate's two-parameter fit ~50 s here)
-    "test_dam_break_impact.py",  # ~100 (23 s here; 38 s before)
+    "test_gradients.py",  # 280 s
+    "test_notebooks.py",  # 263
+    "test_fsi.py",  # 220
+    "test_solver_in_the_loop.py",  # 170
+    "test_rigid.py",  # 153
+    "test_calibrate.py",  # 130
+    "test_params_used.py",  # 129
+    "test_solid_validation.py",  # 126
+    "test_3d.py",  # 100
+    "test_open_boundary.py",  # 97
+    "test_startup.py",  # 92
+    "test_readme.py",  # 69
+    "test_diffrax.py",  # 61
+    "test_surrogate.py",  # 53
+    "test_validation_fluid.py",  # 52
+    "test_solid_second_order.py",  # 51
+    "test_fluid_unit.py",  # 48
+    "test_cavity.py",  # 46
+    "test_dataset.py",  # 43
+    "test_stepper.py",  # 39
 )
 
 
