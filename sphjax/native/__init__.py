@@ -119,10 +119,10 @@ def library() -> str:
             command = [cxx, *FLAGS, "-I", jax.ffi.include_dir(), "-o", str(partial), str(SOURCE)]
             built = subprocess.run(command, capture_output=True, text=True)
             if built.returncode != 0:
+                last = (built.stderr.strip().splitlines() or ["no message"])[-1]
                 raise NativeUnavailable(
-                    "Model.pair_loop='native': building sphjax's pair loops failed "
-                    f"({' '.join(command)}): {built.stderr.strip().splitlines()[-1:]}; "
-                    "use pair_loop='xla'"
+                    f"Model.pair_loop='native': {cxx} could not build sphjax's pair loops "
+                    f"({last}); use pair_loop='xla'"
                 )
             os.replace(partial, target)
     return str(target)
