@@ -200,12 +200,9 @@ void each_pair_once(ffi::ThreadPool* pool, const Setting<T>& s, const T* x, cons
         const T factor = r > T(0) ? inside * s.grad_scale * Shape<T, Kernel>::derivative(q) / safe
                                   : T(0);
         for (int i = 0; i < D; i++) p.grad[i] = factor * p.dr[i];
-        T on_a[W], on_b[W];
-        term.pair(own, p, fb + j, k, on_a, on_b);
-        for (int w = 0; w < W; w++) {
-          oa[w * k + j] = on_a[w];
-          ob[w * k + j] = on_b[w];
-        }
+        // written straight into the buffers: a Term's W numbers held in a local array
+        // per pair would become strided stores, which keep GCC from vectorising the loop
+        term.pair(own, p, fb + j, k, oa + j, ob + j);
       }
       for (int w = 0; w < W; w++) {
         T sum = T(0);
@@ -254,7 +251,8 @@ Setting<T> setting(int dim, double h, double cutoff, double sigma, double lx, do
 //
 // A Term: `width` numbers per particle out, `fields` numbers per neighbour gathered by
 // load(b, into, stride) (into[f * stride] for f < fields), row(a): what it reads of a,
-// pair(own, p, from, stride, on_a, on_b): the pair's numbers for a and for b.
+// pair(own, p, from, stride, on_a, on_b): the pair's numbers for a and for b
+// (on_a[w * stride], on_b[w * stride] for w < width).
 
 template <typename T, int D>
 struct KernelSumTerm {  // sum_b m_b W_ab
@@ -378,8 +376,8 @@ struct MomentumTerm {
     const T factor = morris * nu * (o.inv + inv_b) * along * inverse_denominator;
     for (int i = 0; i < D; i++) {
       const T f = -term * p.grad[i] + factor * v_ab[i];
-      on_a[i] = m_b * f;
-      on_b[i] = -o.m * f;
+      on_a[i * stride] = m_b * f;
+      on_b[i * stride] = -o.m * f;
     }
   }
 };
