@@ -83,8 +83,11 @@ def timed_runs(run, repeats: int):
     return warmup, seconds, cpu_seconds
 
 
-def run_sphjax(n: int, steps: int, repeats: int, skin: float | None = None) -> dict:
-    """Time ``sphjax.simulate`` on Taylor-Green with ``n x n`` particles (in-process)."""
+def run_sphjax(
+    n: int, steps: int, repeats: int, skin: float | None = None, pair_loop: str = "xla"
+) -> dict:
+    """Time ``sphjax.simulate`` on Taylor-Green with ``n x n`` particles (in-process),
+    its pair sums in XLA or in the compiled loops (``Model.pair_loop``)."""
     import jax
 
     import sphjax
@@ -94,6 +97,7 @@ def run_sphjax(n: int, steps: int, repeats: int, skin: float | None = None) -> d
     )
     if skin is not None:
         case = case.replace(model=case.model.replace(neighbor_skin=skin))
+    case = case.replace(model=case.model.replace(pair_loop=pair_loop))
     dt = time_step(n)
 
     def run():
@@ -103,7 +107,7 @@ def run_sphjax(n: int, steps: int, repeats: int, skin: float | None = None) -> d
 
     compile_s, seconds, cpu_seconds = timed_runs(run, repeats)
     return dict(
-        code="sphjax",
+        code=sphjax_code(pair_loop),
         n_particles=case.n_particles,
         steps=steps,
         seconds=seconds,
@@ -113,6 +117,12 @@ def run_sphjax(n: int, steps: int, repeats: int, skin: float | None = None) -> d
         note=f"jax {jax.__version__}, {case.state.position.dtype}, dense neighbour list, "
         f"skin {case.model.neighbor_skin} x support, XLA_FLAGS={os.environ.get('XLA_FLAGS', '')!r}",
     )
+
+
+def sphjax_code(pair_loop: str) -> str:
+    """The name a sphjax run goes by in the table: ``sphjax`` (XLA's pair sums) or
+    ``sphjax-native``."""
+    return "sphjax" if pair_loop == "xla" else f"sphjax-{pair_loop}"
 
 
 # ---------------------------------------------------------------------------- peers
@@ -214,6 +224,13 @@ def main(argv=None):
     parser.add_argument(
         "--skin", type=float, default=None, help="sphjax Model.neighbor_skin (default: the case's)"
     )
+    parser.add_argument(
+        "--pair-loops",
+        nargs="+",
+        choices=("xla", "native"),
+        default=["xla"],
+        help="sphjax's Model.pair_loop values to run (each a row: sphjax, sphjax-native)",
+    )
     parser.add_argument("--json", type=Path, help="also write all raw results here")
     args = parser.parse_args(argv)
 
@@ -244,11 +261,12 @@ def main(argv=None):
     for n in args.sizes:
         per_code: dict[str, list[dict]] = {}
         for _ in range(args.rounds):
-            jobs = [("sphjax", None)] + list(peers.items())
+            jobs = [(sphjax_code(loop), loop) for loop in args.pair_loops]
+            jobs += list(peers.items())
             for name, python in jobs:
                 try:
-                    if python is None:
-                        result = run_sphjax(n, args.steps, args.repeats, args.skin)
+                    if name.startswith("sphjax"):
+                        result = run_sphjax(n, args.steps, args.repeats, args.skin, python)
                     else:
                         result = run_peer(
                             name, python, n, args.steps, args.repeats, args.pysph_threads
@@ -261,7 +279,7 @@ def main(argv=None):
                 speeds = ", ".join(f"{rate(result, s) / 1e6:.3f}" for s in result["seconds"])
                 cpu = ", ".join(f"{rate(result, s) / 1e6:.3f}" for s in result["cpu_seconds"])
                 print(
-                    f"  {name:8s} {result['n_particles']:6d} particles: {speeds} "
+                    f"  {name:13s} {result['n_particles']:6d} particles: {speeds} "
                     f"M particle-steps/s; per CPU-s {cpu} (warm-up {result['warmup_s']:.1f} s)",
                     flush=True,
                 )
@@ -271,19 +289,19 @@ def main(argv=None):
     print("M particle-steps/s: wall clock (median, best of all timed runs) and per CPU-second")
     print("(process CPU time, all threads); ratios are sphjax / peer of the wall-clock medians,")
     print("in brackets of the CPU-time rates.")
-    header = f"{'code':8s} {'particles':>9s} {'median':>8s} {'best':>8s} {'per-CPU-s':>9s}"
+    header = f"{'code':13s} {'particles':>9s} {'median':>8s} {'best':>8s} {'per-CPU-s':>9s}"
     print(f"{header}  {'vs JAX-SPH':>15s} {'vs PySPH':>15s}")
     for row in table:
         for name, s in row.items():
             ratios = ["", ""]
-            if name == "sphjax":
+            if name.startswith("sphjax"):
                 for k, peer in enumerate(("jax-sph", "pysph")):
                     if peer in row:
                         wall = s["median"] / row[peer]["median"]
                         cpu = s["cpu"] / row[peer]["cpu"]
                         ratios[k] = f"{wall:.2f}x ({cpu:.2f}x)"
             print(
-                f"{name:8s} {s['n_particles']:9d} {s['median'] / 1e6:8.3f} {s['best'] / 1e6:8.3f}"
+                f"{name:13s} {s['n_particles']:9d} {s['median'] / 1e6:8.3f} {s['best'] / 1e6:8.3f}"
                 f" {s['cpu'] / 1e6:9.3f}  {ratios[0]:>15s} {ratios[1]:>15s}   {s['note']}"
             )
     if args.json:
