@@ -8,8 +8,9 @@ repeats the chunk: results unchanged, but the chunk's program is compiled a seco
 lid-driven corner, a channel filling from its inflow, a disk sinking through its fluid)
 starts with room instead (:func:`lists_with_room`), and ``-W
 error::sphjax.neighbors.NeighborOverflowWarning`` shows that no re-allocation is left.
-What is computed is the same: a list's padding holds no neighbours.  The tests of the
-re-allocation itself keep the tight lists.
+The results are those of the tight lists to round-off (padding holds no neighbours; only
+the order of a sum may change).  The tests of the re-allocation itself keep the tight
+lists.
 """
 
 from __future__ import annotations
@@ -20,8 +21,9 @@ import pytest
 
 from sphjax.integration import simulate as simulate_module
 
-#: room above the largest neighbour count at the start of a run for these tests (a
-#: corner of the cavity reaches 1.6 times its count at rest)
+#: room above the largest neighbour count at the start of a run for these tests: enough
+#: for the cavity's lid corners, the channel's buffers and the settling disk (their runs
+#: pass with -W error::sphjax.neighbors.NeighborOverflowWarning)
 ROOMY_MARGIN = 0.6
 
 
