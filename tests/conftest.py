@@ -39,7 +39,7 @@ jax.config.update(
 # (Files whose tests were since made to compile less: their suite seconds scaled by their
 # times alone before and after, measured with an empty compile cache.)
 COSTLIEST_FIRST = (
-    "test_gradients.py",  # 263 s
+    "test_gradients.py",  # 261 s
     "test_notebooks.py",  # 263
     "test_fsi.py",  # 204
     "test_solver_in_the_loop.py",  # 170
@@ -50,9 +50,9 @@ COSTLIEST_FIRST = (
     "test_params_used.py",  # 84
     "test_open_boundary.py",  # 80
     "test_readme.py",  # 69
-    "test_diffrax.py",  # 61
     "test_startup.py",  # 57
     "test_surrogate.py",  # 53
+    "test_diffrax.py",  # 52
     "test_validation_fluid.py",  # 52
     "test_fluid_unit.py",  # 48
     "test_dataset.py",  # 43
