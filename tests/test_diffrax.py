@@ -10,7 +10,7 @@ import jax.numpy as jnp
 import pytest
 
 import sphjax
-from sphjax.integration.diffrax import diffeqsolve_case, state_of
+from sphjax.integration.diffrax import diffeqsolve_case, initial_phase, sph_args, state_of
 
 
 def kinetic_energy(state):
@@ -39,6 +39,27 @@ def test_matches_scan_taylor_green():
 
 def test_matches_scan_dam_break_with_walls_and_continuity_density():
     _compare(sphjax.cases.dam_break(n=4), n_steps=40, save_every=20, tol=1e-12)
+
+
+def test_the_initial_phase_is_one_program():
+    """``y0`` (the first evaluation, before the solve) is one compiled program, not one per
+    operation (106 for this dam break).  After the test above, whose solve
+    compiled it, none."""
+    case = sphjax.cases.dam_break(n=4)
+    args = sph_args(case)
+    compiled = []
+
+    def listen(event, duration, **_):
+        compiled.append(event == "/jax/core/compile/jaxpr_to_mlir_module_duration")
+
+    jax.monitoring.register_event_duration_secs_listener(listen)
+    try:
+        y0 = initial_phase(case, args)
+    finally:
+        jax.monitoring.unregister_event_duration_listener(listen)
+    assert sum(compiled) <= 1, sum(compiled)
+    assert y0.density.shape == (case.n_particles,)
+    assert bool(jnp.all(jnp.isfinite(y0.density)))
 
 
 def test_matches_scan_lid_driven_cavity_wall_sliding_along_itself():

@@ -13,6 +13,7 @@ import dataclasses
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 import pytest
 
 import sphjax
@@ -200,24 +201,30 @@ def _perturbed_state(case):
     floor's top row of wall particles), sliding at 2 m/s (so friction caps the contact's
     tangential dashpot)."""
     s = case.state
-    x = s.position
-    solid = (s.kind == sphjax.Kind.SOLID)[:, None]
+    # numpy: each jax.numpy operation on the host compiles a program per case's shape
+    x = np.asarray(s.position)
+    kind = np.asarray(s.kind)
+    solid = (kind == sphjax.Kind.SOLID)[:, None]
     scale = case.info.get("dx", 0.01)
-    bend = 0.02 * scale * jnp.sin(3.0 * x[:, ::-1] / scale) * jnp.cos(2.0 * x / scale)
-    x = jnp.where(solid, x + bend, x)
-    velocity = s.velocity + 0.1 * jnp.cos(5.0 * x / scale)
+    bend = 0.02 * scale * np.sin(3.0 * x[:, ::-1] / scale) * np.cos(2.0 * x / scale)
+    x = np.where(solid, x + bend, x)
+    velocity = np.asarray(s.velocity) + 0.1 * np.cos(5.0 * x / scale)
     rigid = case.model.system(sphjax.RigidSystem)
     if rigid is not None and rigid.wall_contact is not None:
-        body = (s.kind == sphjax.Kind.RIGID)[:, None]
-        lowest = jnp.min(jnp.where(body[:, 0], x[:, 1], jnp.inf))
-        x = jnp.where(body, x.at[:, 1].add(0.7 * scale - lowest), x)
-        velocity = jnp.where(body, velocity.at[:, 0].add(2.0), velocity)
+        body = (kind == sphjax.Kind.RIGID)[:, None]
+        lowest = np.min(np.where(body[:, 0], x[:, 1], np.inf))
+        lowered = x.copy()
+        lowered[:, 1] += 0.7 * scale - lowest
+        x = np.where(body, lowered, x)
+        sliding = velocity.copy()
+        sliding[:, 0] += 2.0
+        velocity = np.where(body, sliding, velocity)
     return s.replace(
-        position=x,
-        mass=s.mass * (1.0 + 0.05 * jnp.sin(7.0 * x[:, 0] / scale)),
-        velocity=velocity,
-        density=s.density * (1.0 + 1e-3 * jnp.sin(3.0 * x[:, 0] / scale)),
-        shift_acceleration=jnp.ones_like(s.shift_acceleration),
+        position=jnp.asarray(x),
+        mass=jnp.asarray(np.asarray(s.mass) * (1.0 + 0.05 * np.sin(7.0 * x[:, 0] / scale))),
+        velocity=jnp.asarray(velocity),
+        density=jnp.asarray(np.asarray(s.density) * (1.0 + 1e-3 * np.sin(3.0 * x[:, 0] / scale))),
+        shift_acceleration=jnp.asarray(np.ones_like(np.asarray(s.shift_acceleration))),
     )
 
 
@@ -286,7 +293,7 @@ def test_the_whole_params_gradient_is_zero_for_unused_fields_and_says_which_are_
         out = sphjax.evaluate(state, neighbors, case.model, params, density_step=case.dt)
         return jnp.sum(out.acceleration**2) + jnp.sum(out.density_rate**2) * 1e-6
 
-    grads = jax.grad(loss)(case.params)
+    grads = jax.jit(jax.grad(loss))(case.params)  # one program, not one per operation
     unused = [name for name, _ in case.params.unused]
     assert case.params.used == tuple(n for n in _fields_of(case.params) if n not in unused)
     assert set(unused) == set(MONAGHAN_WALLS) and "kinematic_viscosity" not in case.params.used

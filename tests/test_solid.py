@@ -7,6 +7,7 @@ F = diag(2, 3) give S = diag(8.5, 13.5), P = diag(17, 40.5); a rotation gives P 
 
 from __future__ import annotations
 
+import functools
 import math
 
 import jax
@@ -69,8 +70,10 @@ def _setup(n=9, dim=2, kernel=None, h=H, penalty=False, **params):
     return X, state, build_neighbors(state, model), model, p
 
 
+@functools.partial(jax.jit, static_argnums=2)
 def solid_fields(state, neighbors, model, params):
-    """The solid's fields after the update stage (``L0``, ``F``, ``P``)."""
+    """The solid's fields after the update stage (``L0``, ``F``, ``P``): one compiled
+    program per patch, not one per operation and shape."""
     return update_stage(state, neighbors, model, params)[0]
 
 

@@ -161,7 +161,10 @@ def test_a_concrete_evaluate_is_one_program():
     # to round-off of the largest acceleration (gravity cancels in the column: 1e-4 of it)
     scale = np.max(np.abs(expected))
     np.testing.assert_allclose(np.asarray(rates.acceleration), expected, atol=1e-12 * scale)
-    alpha = jax.grad(lambda a: jnp.sum(traced(case.params.replace(artificial_alpha=a)) ** 2))
+    # jitted: one program, not one per operation
+    alpha = jax.jit(
+        jax.grad(lambda a: jnp.sum(traced(case.params.replace(artificial_alpha=a)) ** 2))
+    )
     assert np.isfinite(float(alpha(case.params.fluid.artificial_alpha)))
 
 

@@ -25,6 +25,7 @@ frames and, by default, ``RecursiveCheckpointAdjoint`` for reverse-mode gradient
 
 from __future__ import annotations
 
+import functools
 import math
 
 import diffrax
@@ -61,8 +62,16 @@ def sph_args(case: Case, params: Params | None = None, state: State | None = Non
 
 def initial_phase(case: Case, args: SPHArgs) -> Phase:
     """``y0``: the initial State with its density evaluated, as :func:`sphjax.simulate`
-    does before its first step (summation density, wall extrapolation)."""
-    rates = SPHTerm(case.model).vf(0.0, phase_of(args.state), args)
+    does before its first step (summation density, wall extrapolation).  One compiled
+    program for concrete ``args`` (evaluated operation by operation it compiled about 100
+    small programs per case, seconds before the solve), traced into the caller's
+    program otherwise."""
+    return _initial_phase(case.model, args)
+
+
+@functools.partial(jax.jit, static_argnums=0)
+def _initial_phase(model, args: SPHArgs) -> Phase:
+    rates = SPHTerm(model).vf(0.0, phase_of(args.state), args)
     return Phase(args.state.position, args.state.velocity, rates.density)
 
 
