@@ -125,6 +125,9 @@ void rebuild(ffi::ThreadPool* pool, const Grid<T>& g, const T* x, int64_t n, int
     fullest = std::max(fullest, first[c + 1]);
     first[c + 1] += first[c];
   }
+  std::vector<int64_t> turn(count);  // where each cell's members start (rotation)
+  for (int64_t c = 0; c < count; c++)
+    turn[c] = rotation(first[c], first[c + 1] - first[c], g.capacity);
   std::vector<int32_t> member(n);  // the particles in cell order
   std::vector<T> xs(D * n);        // their positions, axis by axis
   {
@@ -167,15 +170,18 @@ void rebuild(ffi::ThreadPool* pool, const Grid<T>& g, const T* x, int64_t n, int
       int64_t found_count = 0;
       for (int64_t s = 0; s < around; s++) {
         int64_t key = 0, stride = 1;
-        for (int i = 0; i < D; i++) {
-          key += stride * ((cell[i] + offsets[s * D + i] + g.cells[i]) % g.cells[i]);
+        for (int i = 0; i < D; i++) {  // (c + o) mod cells, o in {-1, 0, 1}
+          int64_t c = cell[i] + offsets[s * D + i];
+          c += c < 0 ? g.cells[i] : (c >= g.cells[i] ? -g.cells[i] : 0);
+          key += stride * c;
           stride *= g.cells[i];
         }
-        const int64_t begin = first[key], end = first[key + 1];
-        const int64_t turn = rotation(begin, end - begin, g.capacity);
-        for (int64_t r = 0; r < end - begin; r++) {  // without a branch: which b is in
-          const int64_t j = begin + (r + turn < end - begin ? r + turn : r + turn - (end - begin));
-          T r2 = T(0);                               // is unpredictable
+        const int64_t begin = first[key], m = first[key + 1] - begin, start = turn[key];
+        // the members in their slots' order; without a branch: which b is in is
+        // unpredictable
+        for (int64_t r = 0; r < m; r++) {
+          const int64_t j = begin + (r + start < m ? r + start : r + start - m);
+          T r2 = T(0);
           for (int i = 0; i < D; i++) {
             const T d = wrapped(xa[i] - xs[i * n + j], g.box[i], g.half[i]);
             r2 += d * d;
