@@ -54,7 +54,7 @@ for _ in range(repeats):
     wall.append(time.perf_counter() - t0)
     cpu.append(time.process_time() - c0)
 print("RESULT " + json.dumps(dict(n=case.n_particles, wall=min(wall) / steps,
-                                  cpu=min(cpu) / steps)))
+                                  cpu=min(cpu) / steps, source=sphjax.__file__)))
 """
 
 CASES = ("tg10k", "tg40k", "dam", "abc32")
@@ -62,20 +62,25 @@ LOOPS = ("xla", "native")
 
 
 def measure(case: str, loop: str, steps: int, repeats: int, checkout: str | None = None) -> dict:
-    """One measurement in a fresh process; ``checkout``: import sphjax from there."""
+    """One measurement in a fresh process; ``checkout``: import sphjax from there (run in
+    that folder: ``python -c`` puts the working directory first on the path)."""
     env = {**os.environ, "JAX_PLATFORMS": "cpu"}
     if checkout is not None:
         env["PYTHONPATH"] = os.pathsep.join([checkout, env.get("PYTHONPATH", "")])
     out = subprocess.run(
         [sys.executable, "-c", CHILD, case, loop.split("@")[0], str(steps), str(repeats)],
         env=env,
+        cwd=checkout,
         capture_output=True,
         text=True,
     )
     lines = [line for line in out.stdout.splitlines() if line.startswith("RESULT ")]
     if out.returncode or not lines:
         raise SystemExit(f"{case} with pair_loop={loop!r} failed: {out.stderr.strip()[-400:]}")
-    return json.loads(lines[-1][len("RESULT ") :])
+    row = json.loads(lines[-1][len("RESULT ") :])
+    if checkout is not None and not row["source"].startswith(checkout):
+        raise SystemExit(f"--baseline: the run imported {row['source']}, not {checkout}'s")
+    return row
 
 
 def load() -> str:
