@@ -5,12 +5,14 @@ skin, the domain (its box and periodic axes) and the capacity multiplier, nothin
 physics.  Particles that interact in the current configuration search their neighbours
 with jax-md cell lists (``jax_md.partition.neighbor_list``, dense format ``[N, K]``,
 :class:`NeighborSearch`) and a Verlet skin: the list is rebuilt inside ``jit`` only when
-some particle has moved half the skin.  The helpers here cut such a list into the
-neighbours of one block of particles among another (:func:`split_list`), pack its rows
-that have neighbours (:func:`compact_rows`), keep only the neighbours inside the support
-(:func:`support_list`), and measure the counts an allocation is sized from
-(:func:`measured_capacity`, :func:`measured_members`, :func:`measured_support`; the
-sizing rule is :func:`sphjax.neighbors.capacity.sized`).
+some particle has moved half the skin.  With ``SearchGeometry.native`` (a model with
+``pair_loop="native"``) a rebuild runs as the compiled cell list of :mod:`sphjax.native`
+instead, which writes jax-md's list entry for entry and sets the same error bits.  The
+helpers here cut such a list into the neighbours of one block of particles among another
+(:func:`split_list`), pack its rows that have neighbours (:func:`compact_rows`), keep only
+the neighbours inside the support (:func:`support_list`), and measure the counts an
+allocation is sized from (:func:`measured_capacity`, :func:`measured_members`,
+:func:`measured_support`; the sizing rule is :func:`sphjax.neighbors.capacity.sized`).
 
 Solids use their reference-configuration neighbours, found once
 (:func:`reference_neighbors`; eqs. 15-16), by a vectorised numpy cell list
