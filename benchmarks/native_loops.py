@@ -12,7 +12,10 @@ defaults: continuity density with Molteni & Colagrossi's diffusion, Monaghan vis
 no-slip walls), ``abc32`` (3D ABC flow at 32^3 without transport velocity).  Prints, per
 case, the best wall-clock and CPU milliseconds per step of each loop and the ratios
 (xla / native: above 1 means the native loops are faster), and the load average before
-and after.  A benchmark reports; it asserts nothing.
+and after.  ``--baseline DIR`` also runs ``pair_loop="native"`` with the sphjax of another
+checkout (e.g. a git worktree of an earlier commit), alternating with the others, and
+adds its figures and the ratio baseline / native.  A benchmark reports; it asserts
+nothing.
 """
 
 from __future__ import annotations
@@ -51,25 +54,33 @@ for _ in range(repeats):
     wall.append(time.perf_counter() - t0)
     cpu.append(time.process_time() - c0)
 print("RESULT " + json.dumps(dict(n=case.n_particles, wall=min(wall) / steps,
-                                  cpu=min(cpu) / steps)))
+                                  cpu=min(cpu) / steps, source=sphjax.__file__)))
 """
 
 CASES = ("tg10k", "tg40k", "dam", "abc32")
 LOOPS = ("xla", "native")
 
 
-def measure(case: str, loop: str, steps: int, repeats: int) -> dict:
+def measure(case: str, loop: str, steps: int, repeats: int, checkout: str | None = None) -> dict:
+    """One measurement in a fresh process; ``checkout``: import sphjax from there (run in
+    that folder: ``python -c`` puts the working directory first on the path)."""
     env = {**os.environ, "JAX_PLATFORMS": "cpu"}
+    if checkout is not None:
+        env["PYTHONPATH"] = os.pathsep.join([checkout, env.get("PYTHONPATH", "")])
     out = subprocess.run(
-        [sys.executable, "-c", CHILD, case, loop, str(steps), str(repeats)],
+        [sys.executable, "-c", CHILD, case, loop.split("@")[0], str(steps), str(repeats)],
         env=env,
+        cwd=checkout,
         capture_output=True,
         text=True,
     )
     lines = [line for line in out.stdout.splitlines() if line.startswith("RESULT ")]
     if out.returncode or not lines:
         raise SystemExit(f"{case} with pair_loop={loop!r} failed: {out.stderr.strip()[-400:]}")
-    return json.loads(lines[-1][len("RESULT ") :])
+    row = json.loads(lines[-1][len("RESULT ") :])
+    if checkout is not None and not row["source"].startswith(checkout):
+        raise SystemExit(f"--baseline: the run imported {row['source']}, not {checkout}'s")
+    return row
 
 
 def load() -> str:
@@ -83,20 +94,28 @@ def main(argv=None) -> dict:
     p.add_argument("--steps", type=int, default=200)
     p.add_argument("--repeats", type=int, default=2, help="timed calls per measurement")
     p.add_argument("--rounds", type=int, default=2, help="alternating rounds")
+    p.add_argument(
+        "--baseline",
+        metavar="DIR",
+        help="also time pair_loop='native' with the sphjax of this checkout",
+    )
     args = p.parse_args(argv)
     if args.steps < 1 or args.repeats < 1 or args.rounds < 1:
         p.error("--steps, --repeats and --rounds: give positive numbers")
+    baseline = None if args.baseline is None else os.path.abspath(args.baseline)
+    loops = LOOPS + (() if baseline is None else ("native@baseline",))
     print(f"load average before: {load()}", flush=True)
     best: dict = {}
     for _ in range(args.rounds):
         for case in args.cases:
-            for loop in LOOPS:
-                row = measure(case, loop, args.steps, args.repeats)
+            for loop in loops:
+                checkout = baseline if loop.endswith("@baseline") else None
+                row = measure(case, loop, args.steps, args.repeats, checkout)
                 key = (case, loop)
                 if key not in best or row["cpu"] < best[key]["cpu"]:
                     best[key] = row
                 print(
-                    f"  {case:6s} {loop:6s} {1e3 * row['wall']:8.2f} wall ms/step "
+                    f"  {case:6s} {loop:15s} {1e3 * row['wall']:8.2f} wall ms/step "
                     f"{1e3 * row['cpu']:8.2f} CPU ms/step",
                     flush=True,
                 )
@@ -112,6 +131,17 @@ def main(argv=None) -> dict:
             f"{1e3 * n['wall']:.2f} ({1e3 * n['cpu']:.2f}) | {x['wall'] / n['wall']:.2f} | "
             f"{x['cpu'] / n['cpu']:.2f} |"
         )
+    if baseline is not None:
+        print(f"\nbaseline: pair_loop='native' with the sphjax of {baseline}")
+        print("\n| case | baseline wall (CPU) ms | native wall (CPU) ms | wall ratio | CPU ratio |")
+        print("|---|---:|---:|---:|---:|")
+        for case in args.cases:
+            b, n = best[(case, "native@baseline")], best[(case, "native")]
+            print(
+                f"| {case} | {1e3 * b['wall']:.2f} ({1e3 * b['cpu']:.2f}) | "
+                f"{1e3 * n['wall']:.2f} ({1e3 * n['cpu']:.2f}) | {b['wall'] / n['wall']:.2f} | "
+                f"{b['cpu'] / n['cpu']:.2f} |"
+            )
     return {f"{c}/{loop}": row for (c, loop), row in best.items()}
 
 

@@ -10,8 +10,9 @@ For one case (float32; ``--pair-loop native``: with the compiled loops of
 
 * ``step``: one kick-drift-kick step with its neighbour update, averaged over a
   ``lax.scan`` of ``--steps`` steps (the unit of ``sphjax.simulate``);
-* ``rebuild``: one forced neighbour rebuild (jax-md cell list and the split into lists per
-  pair of systems), and how many of the ``--steps`` steps rebuilt (Verlet skin);
+* ``rebuild``: one forced neighbour rebuild (jax-md's cell list, with ``--pair-loop
+  native`` the compiled one of ``sphjax.native``, and the split into lists per pair of
+  systems), and how many of the ``--steps`` steps rebuilt (Verlet skin);
 * ``update stage`` and ``interaction stage`` of the right-hand side;
 * ``gathers``: reading the neighbours' fields of every pair list (``x, v, m, rho``,
   and ``p``), summed over the neighbours so that nothing else is computed;

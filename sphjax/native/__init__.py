@@ -13,13 +13,19 @@ compiled step as XLA foreign functions (``jax.ffi``):
 * ``continuity_molteni``: eq. 11 with Molteni & Colagrossi's density diffusion;
 * ``momentum``: eq. 10's pressure term with Monaghan's ``Pi_ab`` and Morris' viscosity.
 
+``cell_list.cc`` rebuilds the neighbour search's list (:func:`cell_list_rebuild`, used by
+:class:`sphjax.neighbors.NeighborSearch` when ``SearchGeometry.native``): a counting sort
+into cells at least as wide as the search radius and a scan of the cells around each
+particle, the rows shared between threads; it writes jax-md's dense list, row by row.
+
 The library is built with the machine's C++ compiler (``$CXX``, else ``g++``, else
 ``c++``) the first time a run needs it and kept in ``$SPHJAX_NATIVE_DIR`` (default
 ``~/.cache/sphjax/native``) under a name that changes with the source, the compiler,
 jaxlib and the CPU.
 Derivatives never go through it: :func:`sphjax.physics.pairs.pair_sum` gives the native
 sum XLA's sum as its derivative rule (``jax.custom_jvp``), so ``jax.grad``, ``jax.jvp``
-and the pair sums' custom adjoint see exactly the XLA path.
+and the pair sums' custom adjoint see exactly the XLA path; the cell list takes its
+positions through ``jax.lax.stop_gradient`` (its results are integers).
 """
 
 from __future__ import annotations
@@ -40,7 +46,8 @@ import numpy as np
 
 from sphjax.core.kernels import KERNELS
 
-SOURCE = Path(__file__).with_name("pair_sums.cc")
+#: the library's sources: the pair sums and the neighbour search's cell list
+SOURCES = tuple(Path(__file__).with_name(name) for name in ("pair_sums.cc", "cell_list.cc"))
 FLAGS = (
     "-O3",
     "-march=native",
@@ -52,12 +59,13 @@ FLAGS = (
     "-fPIC",
     "-pthread",
 )
-#: the handlers of ``pair_sums.cc``: XLA target name -> exported symbol
+#: the handlers of ``pair_sums.cc`` and ``cell_list.cc``: XLA target name -> exported symbol
 TARGETS = {
     "sphjax_kernel_sum": "SphjaxKernelSum",
     "sphjax_velocity_divergence": "SphjaxVelocityDivergence",
     "sphjax_continuity_molteni": "SphjaxContinuityMolteni",
     "sphjax_momentum": "SphjaxMomentum",
+    "sphjax_cell_list_rebuild": "SphjaxCellListRebuild",
 }
 #: the kernels ``pair_sums.cc`` knows, by name (its ids)
 KERNEL_IDS = {"cubic_spline": 0, "quintic_spline": 1, "wendland_c2": 2, "wendland_c4": 3}
@@ -106,7 +114,13 @@ def library() -> str:
     version = subprocess.run([cxx, "--version"], capture_output=True, text=True).stdout
     key = hashlib.sha256(
         "\n".join(
-            [SOURCE.read_text(), " ".join(FLAGS), version, jax.__version__, _cpu_model()]
+            [
+                *(source.read_text() for source in SOURCES),
+                " ".join(FLAGS),
+                version,
+                jax.__version__,
+                _cpu_model(),
+            ]
         ).encode()
     ).hexdigest()[:16]
     directory = _cache_dir()
@@ -116,7 +130,8 @@ def library() -> str:
         fcntl.flock(lock, fcntl.LOCK_EX)  # one build at a time (test workers, processes)
         if not target.exists():
             partial = target.with_suffix(f".{os.getpid()}.tmp")
-            command = [cxx, *FLAGS, "-I", jax.ffi.include_dir(), "-o", str(partial), str(SOURCE)]
+            command = [cxx, *FLAGS, "-I", jax.ffi.include_dir(), "-o", str(partial)]
+            command += [str(source) for source in SOURCES]
             built = subprocess.run(command, capture_output=True, text=True)
             if built.returncode != 0:
                 last = (built.stderr.strip().splitlines() or ["no message"])[-1]
@@ -232,4 +247,48 @@ def momentum(x, v, m, rho, p, idx, geometry, parameters, *, artificial: bool, mo
         *scalars,
         artificial=bool(artificial),
         morris=bool(morris),
+    )
+
+
+def cell_list_rebuild(x, width: int, *, box, cell_size, cells, radius2: float, capacity=None):
+    """A dense neighbour list of the positions ``x`` (``[N, d]``, in the search's box
+    ``[0, L)`` per axis), built by ``cell_list.cc``'s counting sort into a grid of cells.
+
+    Args:
+      x: ``[N, d]`` positions (float32 or float64; no derivative: integer results).
+      width: ``K``, the slots per row of the list.
+      box: ``[d]`` the box's lengths ``L`` (every axis wraps: the minimum image).
+      cell_size: ``[d]`` the grid's spacing, at least the search radius.
+      cells: ``[d]`` cells per axis (an axis of fewer than 3 is searched as one cell).
+      radius2: the squared search radius (compared in the positions' precision).
+      capacity: the slots per cell of the jax-md cell list whose order the rows follow
+        (``None``: within a cell, increasing index).
+    Returns:
+      ``(idx, sizes)``: ``[N, K]`` int32 neighbours within the radius (self left out,
+      the first ``K`` of each row, padded with ``N``) and ``[2]`` int32: the most
+      neighbours of one particle and the most particles in one cell.
+    """
+    register()
+    n, dim = x.shape
+    pad = [1.0] * (3 - dim)
+    box, cell_size = list(map(float, box)) + pad, list(map(float, cell_size)) + pad
+    cells = [int(c) for c in cells] + [1] * (3 - dim)
+    results = (
+        jax.ShapeDtypeStruct((n, width), np.int32),
+        jax.ShapeDtypeStruct((2,), np.int32),
+    )
+    call = jax.ffi.ffi_call("sphjax_cell_list_rebuild", results, vmap_method="sequential")
+    return call(
+        jax.lax.stop_gradient(x),
+        lx=np.float64(box[0]),
+        ly=np.float64(box[1]),
+        lz=np.float64(box[2]),
+        cx=np.float64(cell_size[0]),
+        cy=np.float64(cell_size[1]),
+        cz=np.float64(cell_size[2]),
+        nx=np.int64(cells[0]),
+        ny=np.int64(cells[1]),
+        nz=np.int64(cells[2]),
+        radius2=np.float64(radius2),
+        capacity=np.int64(capacity or 0),
     )

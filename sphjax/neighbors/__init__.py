@@ -4,7 +4,8 @@ Three layers, each a module:
 
 - :mod:`~sphjax.neighbors.search`: the jax-md cell-list search, which needs a
   :class:`SearchGeometry` only (support radius, Verlet skin, domain, capacity
-  multiplier), and the reference-configuration search of a solid;
+  multiplier, and whether its rebuild is the compiled cell list of :mod:`sphjax.native`),
+  and the reference-configuration search of a solid;
 - :mod:`~sphjax.neighbors.lists`: :class:`Neighbors`, one :class:`PairList` per ordered
   pair of interacting systems, split from the search whenever it is rebuilt, allocated
   for a :class:`ListPlan` (which pairs, which systems follow the particles) outside

@@ -5,12 +5,14 @@ skin, the domain (its box and periodic axes) and the capacity multiplier, nothin
 physics.  Particles that interact in the current configuration search their neighbours
 with jax-md cell lists (``jax_md.partition.neighbor_list``, dense format ``[N, K]``,
 :class:`NeighborSearch`) and a Verlet skin: the list is rebuilt inside ``jit`` only when
-some particle has moved half the skin.  The helpers here cut such a list into the
-neighbours of one block of particles among another (:func:`split_list`), pack its rows
-that have neighbours (:func:`compact_rows`), keep only the neighbours inside the support
-(:func:`support_list`), and measure the counts an allocation is sized from
-(:func:`measured_capacity`, :func:`measured_members`, :func:`measured_support`; the
-sizing rule is :func:`sphjax.neighbors.capacity.sized`).
+some particle has moved half the skin.  With ``SearchGeometry.native`` (a model with
+``pair_loop="native"``) a rebuild runs as the compiled cell list of :mod:`sphjax.native`
+instead, which writes jax-md's list entry for entry and sets the same error bits.  The
+helpers here cut such a list into the neighbours of one block of particles among another
+(:func:`split_list`), pack its rows that have neighbours (:func:`compact_rows`), keep only
+the neighbours inside the support (:func:`support_list`), and measure the counts an
+allocation is sized from (:func:`measured_capacity`, :func:`measured_members`,
+:func:`measured_support`; the sizing rule is :func:`sphjax.neighbors.capacity.sized`).
 
 Solids use their reference-configuration neighbours, found once
 (:func:`reference_neighbors`; eqs. 15-16), by a vectorised numpy cell list
@@ -41,19 +43,27 @@ _CELL_LIST_FNS: dict = {}
 class SearchGeometry:
     """What a neighbour search needs (hashable): the kernel support radius ``cutoff``,
     the Verlet skin as a fraction of it (``skin_fraction``), the ``domain``
-    (:class:`sphjax.core.model.Domain`) and the multiplier on the measured neighbour
-    count that sizes a list (``capacity_multiplier``)."""
+    (:class:`sphjax.core.model.Domain`), the multiplier on the measured neighbour
+    count that sizes a list (``capacity_multiplier``) and whether a rebuild runs as the
+    compiled cell list of :mod:`sphjax.native` (``native``) rather than jax-md's in XLA."""
 
     cutoff: float
     skin_fraction: float
     domain: object
     capacity_multiplier: float
+    native: bool = False
 
     @classmethod
     def of(cls, model) -> SearchGeometry:
         """The geometry of a Model: ``cutoff``, ``neighbor_skin``, ``domain``,
-        ``neighbor_capacity``."""
-        return cls(model.cutoff, model.neighbor_skin, model.domain, model.neighbor_capacity)
+        ``neighbor_capacity``; ``native`` with ``pair_loop="native"``."""
+        return cls(
+            model.cutoff,
+            model.neighbor_skin,
+            model.domain,
+            model.neighbor_capacity,
+            model.pair_loop == "native",
+        )
 
     @property
     def skin(self) -> float:
@@ -223,12 +233,65 @@ class NeighborSearch:
 
     def update(self, position, neighbors):
         """Update inside ``jit``: rebuilt only if a particle moved more than half the skin."""
-        return neighbors.update(self.to_box(position))
+        x = self.to_box(position)
+        if not self.geometry.native:
+            return neighbors.update(x)
+        # jax-md's test: the squared periodic distance of some particle from its position
+        # at the last rebuild above (skin / 2)^2, the threshold in float32 as jax-md has it
+        displacement, _ = jmd_space.periodic(self.box)
+        moved = jax.vmap(lambda a, b: jmd_space.square_distance(displacement(a, b)))(
+            x, neighbors.reference_position
+        )
+        threshold = (np.float32(self.skin) / np.float32(2)) ** 2
+        return jax.lax.cond(
+            jnp.any(moved > threshold),
+            lambda: self._native_rebuild(x, neighbors),
+            lambda: neighbors,
+        )
 
     def rebuild(self, position, neighbors):
         """Force a rebuild at ``position`` with the capacity of ``neighbors`` (jittable)."""
+        if self.geometry.native:
+            return self._native_rebuild(self.to_box(position), neighbors)
         fns = self._functions(0.0)
         return fns.update(self.to_box(position), neighbors)
+
+    @functools.cached_property
+    def _grid(self) -> dict:
+        """The compiled cell list's grid and radius (:func:`sphjax.native.cell_list_rebuild`):
+        jax-md's grid (cells of the float32 box over the search radius, in float32), an
+        axis of fewer than 3 cells searched as one; the squared radius in the default
+        float precision, as jax-md squares it."""
+        radius = self.geometry.cutoff + self.skin
+        box = self.box.astype(np.float32)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            cells = np.floor(box / np.float32(radius))
+            size = box / cells
+        used = cells >= 3
+        r = np.asarray(radius, np.float64 if self.x64 else np.float32)
+        return dict(
+            box=self.box,
+            cell_size=np.where(used, size, box).astype(np.float64),
+            cells=np.where(used, cells, 1).astype(np.int64),
+            radius2=float(r * r),
+        )
+
+    def _native_rebuild(self, x, neighbors):
+        """jax-md's rebuild of ``neighbors`` at the boxed positions ``x``, by the compiled
+        cell list: the same neighbours per row, the same error bits (a row wider than the
+        list; a cell fuller than jax-md's cell list holds, where it has one)."""
+        from sphjax import native
+
+        idx, sizes = native.cell_list_rebuild(
+            x, neighbors.idx.shape[-1], capacity=neighbors.cell_list_capacity, **self._grid
+        )
+        codes = partition.PartitionErrorCode
+        error = neighbors.error.update(
+            codes.NEIGHBOR_LIST_OVERFLOW, sizes[0] > neighbors.max_occupancy
+        )
+        if neighbors.cell_list_capacity is not None:
+            error = error.update(codes.CELL_LIST_OVERFLOW, sizes[1] > neighbors.cell_list_capacity)
+        return neighbors.set(idx=idx, reference_position=x, error=error)
 
 
 @functools.lru_cache(maxsize=32)
