@@ -48,6 +48,8 @@ from sphjax.core.kernels import KERNELS
 
 #: the library's sources: the pair sums and the neighbour search's cell list
 SOURCES = tuple(Path(__file__).with_name(name) for name in ("pair_sums.cc", "cell_list.cc"))
+#: the headers they include (part of the build's key)
+HEADERS = (Path(__file__).with_name("threads.h"),)
 FLAGS = (
     "-O3",
     "-march=native",
@@ -115,7 +117,7 @@ def library() -> str:
     key = hashlib.sha256(
         "\n".join(
             [
-                *(source.read_text() for source in SOURCES),
+                *(source.read_text() for source in SOURCES + HEADERS),
                 " ".join(FLAGS),
                 version,
                 jax.__version__,

@@ -33,37 +33,15 @@
 #include <mutex>
 #include <vector>
 
+#include "threads.h"
 #include "xla/ffi/api/ffi.h"
 
 namespace ffi = xla::ffi;
 
 namespace {
 
-// Run body(t) for t < threads: t = 0 on the calling thread, the others on XLA's CPU pool.
-template <typename Body>
-void in_parallel(ffi::ThreadPool* pool, int64_t threads, Body body) {
-  std::mutex mutex;
-  std::condition_variable done;
-  int64_t remaining = threads - 1;
-  for (int64_t t = 1; t < threads; t++)
-    pool->Schedule([&, t] {
-      body(t);
-      std::lock_guard<std::mutex> lock(mutex);
-      if (--remaining == 0) done.notify_one();
-    });
-  body(0);
-  std::unique_lock<std::mutex> lock(mutex);
-  done.wait(lock, [&] { return remaining == 0; });
-}
-
-// Threads sharing the rows: XLA's pool's size (at most $SPHJAX_NATIVE_THREADS), at least
-// 1024 rows each.
-inline int64_t thread_count(ffi::ThreadPool* pool, int64_t n) {
-  int64_t threads = pool == nullptr ? 1 : std::max<int64_t>(1, pool->num_threads());
-  if (const char* env = std::getenv("SPHJAX_NATIVE_THREADS"))
-    threads = std::min<int64_t>(threads, std::max<int64_t>(1, std::atoll(env)));
-  return std::min<int64_t>(threads, std::max<int64_t>(1, n / 1024));
-}
+using sphjax_native::in_parallel;
+using sphjax_native::thread_count;
 
 // The search: the box, its grid, the radius.
 template <typename T>

@@ -32,6 +32,7 @@
 #include <mutex>
 #include <vector>
 
+#include "threads.h"
 #include "xla/ffi/api/ffi.h"
 
 namespace ffi = xla::ffi;
@@ -123,32 +124,8 @@ struct Pair {
 // one after.  Pairs outside the support have W = grad W = 0, so every term is 0 there and
 // the loop has no branch.  Threads take equal ranges of rows, each with its own output
 // copy.
-// Run body(t) for t < threads: t = 0 on the calling thread, the others on XLA's own CPU
-// thread pool (whose threads would otherwise spin beside ours), and wait for them.
-template <typename Body>
-void in_parallel(ffi::ThreadPool* pool, int64_t threads, Body body) {
-  std::mutex mutex;
-  std::condition_variable done;
-  int64_t remaining = threads - 1;
-  for (int64_t t = 1; t < threads; t++)
-    pool->Schedule([&, t] {
-      body(t);
-      std::lock_guard<std::mutex> lock(mutex);
-      if (--remaining == 0) done.notify_one();
-    });
-  body(0);
-  std::unique_lock<std::mutex> lock(mutex);
-  done.wait(lock, [&] { return remaining == 0; });
-}
-
-// How many threads share the rows: XLA's pool's size (at most $SPHJAX_NATIVE_THREADS),
-// one per 1024 rows at least.
-inline int64_t thread_count(ffi::ThreadPool* pool, int64_t n) {
-  int64_t threads = pool == nullptr ? 1 : std::max<int64_t>(1, pool->num_threads());
-  if (const char* env = std::getenv("SPHJAX_NATIVE_THREADS"))
-    threads = std::min<int64_t>(threads, std::max<int64_t>(1, std::atoll(env)));
-  return std::min<int64_t>(threads, std::max<int64_t>(1, n / 1024));
-}
+using sphjax_native::in_parallel;
+using sphjax_native::thread_count;
 
 template <typename T, int D, int Kernel, typename Term>
 void each_pair_once(ffi::ThreadPool* pool, const Setting<T>& s, const T* x, const int32_t* idx,
