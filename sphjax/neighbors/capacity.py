@@ -33,13 +33,14 @@ __all__ = [
     "grown_multiplier",
     "is_neighbor_overflow",
     "overflow_message",
+    "pair_sized",
     "sized",
     "widest",
 ]
 
 #: room above the largest neighbour count in the lists of a concrete (chunked) run, which
-#: re-allocates on overflow; traced runs (grad, jit) cannot and keep
-#: ``Model.neighbor_capacity``
+#: re-allocates on overflow: the default of ``Model.neighbor_margin``; traced runs (grad,
+#: jit) cannot and keep ``Model.neighbor_capacity``
 NEIGHBOR_MARGIN = 0.05
 #: a list that overflows in the chunked driver grows to at least this factor times its
 #: old size, and to at least ``OVERFLOW_MIN_SIZE`` slots (rows) (:func:`grown`)
@@ -92,6 +93,18 @@ def sized(count: int, multiplier: float, extra: int = 0) -> int:
     """The capacity for a measured ``count``: ``ceil(count * multiplier) + extra``, at
     least 1."""
     return max(1, int(math.ceil(count * multiplier)) + int(extra))
+
+
+def pair_sized(count: int, multiplier: float, extra: int = 0, grows: bool = False) -> int:
+    """The size of a list between two systems (its width, or its compacted rows) for a
+    measured ``count``: :func:`sized`, and with ``grows`` (a list that the chunked driver
+    re-allocates when it overflows) at least :data:`OVERFLOW_MIN_SIZE` while it is empty
+    (a fluid's list against an obstacle it has not reached): its first overflow, when
+    the fluid arrives, would grow it to that size anyway (:func:`grown`) and compile the
+    run anew."""
+    if grows and count == 0:
+        return max(OVERFLOW_MIN_SIZE, sized(count, multiplier, extra))
+    return sized(count, multiplier, extra)
 
 
 class ListSizes(NamedTuple):
