@@ -609,8 +609,8 @@ def test_water_reaches_the_obstacle_without_a_reallocation(obstacle_run, monkeyp
     slots and rows, what their first overflow would grow them to, so the water's arrival
     re-allocates nothing (the command-line run through the impact notes no
     re-allocation) and the run equals, to round-off, one whose lists start at one slot and
-    one row (the sizing of a measured count alone), which re-allocates them as the water
-    arrives (step 467 of the 480 compared)."""
+    one row (the sizing of a measured count alone), which re-allocates them once, as the
+    water arrives near the end of the 480 steps compared."""
     from sphjax.neighbors import OVERFLOW_MIN_SIZE, NeighborOverflowWarning, capacity, search
     from sphjax.physics.rhs import build_neighbors
 
