@@ -137,8 +137,9 @@ def grown(old: ListSizes, needed: ListSizes) -> ListSizes:
     spreading along a wall, or reaching a structure, brings ever more particles to it)
     and every re-allocation compiles the chunk anew: growing by a factor keeps the
     number of re-allocations logarithmic in the growth, and the floor spares the lists
-    between two systems that start nearly empty (a fluid's against an obstacle it has
-    not reached: 1 slot, 1 row) one re-allocation per few particles that arrive.
+    between two systems that start nearly empty (a fluid's against an obstacle that a
+    few of its particles have reached) one re-allocation per few particles that arrive;
+    a list that starts empty is allocated at the floor (:func:`pair_sized`).
     Widths stay capped by the search's (:func:`sphjax.neighbors.lists.allocate`)."""
 
     def grow(before: dict, after: dict) -> dict:
