@@ -193,6 +193,14 @@ def apply_sets(case, sets: list[tuple[str, float | tuple]]):
 # ---------------------------------------------------------------------------- saving
 
 
+def with_neighbor_margin(case, margin: float):
+    """``case`` with ``Model.neighbor_margin``."""
+    try:
+        return case.replace(model=case.model.replace(neighbor_margin=margin))
+    except ValueError as err:
+        raise UsageError("--neighbor-margin", str(err)) from None
+
+
 def with_pair_loop(case, pair_loop: str):
     """``case`` with ``Model.pair_loop``; for ``"native"`` the loops are built (or found
     built) now, so that a machine without a compiler is told before the run starts."""
@@ -361,6 +369,8 @@ def run_case(args, out: Path) -> int:
     case = apply_sets(case, args.set)
     if args.pair_loop != case.model.pair_loop:
         case = with_pair_loop(case, args.pair_loop)
+    if args.neighbor_margin is not None:
+        case = with_neighbor_margin(case, args.neighbor_margin)
     p = plan(case, dt=dt, t_end=args.t_end, save_every=save_every, save_dt=save_dt)
     full = p.n_steps // p.save_every
     chunk = frames_per_chunk(full, p.save_every) * p.save_every

@@ -256,6 +256,15 @@ def _add_run(sub) -> None:
         "(CPU only; built with the machine's C++ compiler at first use); see "
         "Model.pair_loop",
     )
+    run.add_argument(
+        "--neighbor-margin",
+        type=float,
+        default=None,
+        metavar="FRACTION",
+        help="room above the largest neighbour count in the lists at the start (default "
+        "0.05); more, e.g. 0.5, for a flow that crowds its particles, when the run notes "
+        "re-allocations (each one more compilation); see Model.neighbor_margin",
+    )
     run.add_argument("--quiet", action="store_true", help="no progress bar")
 
 

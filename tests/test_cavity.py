@@ -9,7 +9,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
-from _room import lists_with_room
+from _room import with_room
 
 import sphjax
 from sphjax import Kind
@@ -59,8 +59,8 @@ def test_lid_slides_along_itself_and_drives_the_fluid():
     kind = np.asarray(case.state.kind)
     x0 = np.asarray(case.state.position)
     assert len(lid) > 0 and np.all(x0[lid, 1] > 1.0) and np.all(kind[lid] == Kind.WALL)
-    with lists_with_room():  # the lid's corners crowd: one compilation, not two
-        final = sphjax.simulate(case, t_end=2.0).final
+    # the lid's corners crowd: room for them, one compilation, not two
+    final = sphjax.simulate(with_room(case, capacity=None), t_end=2.0).final
     x, v = np.asarray(final.position), np.asarray(final.velocity)
     walls = kind == Kind.WALL
     np.testing.assert_array_equal(x[walls], x0[walls])
@@ -108,8 +108,8 @@ def test_re100_centrelines_against_ghia_at_ci_resolution():
     At n = 40 the same is 0.011 and 0.006 (docs/validation_fluid.md)."""
     case = lid_driven_cavity(n=16, t_end=8.0)
     every = int(round(0.1 / case.dt))
-    with lists_with_room():  # the lid's corners crowd: one compilation, not two
-        traj = sphjax.simulate(case, t_end=8.0, save_every=every)
+    # the lid's corners crowd: room for them, one compilation, not two
+    traj = sphjax.simulate(with_room(case, capacity=None), t_end=8.0, save_every=every)
     u, v = (np.asarray(a) for a in centreline_profiles(traj, case))
     last = np.asarray(traj.times) >= 6.0 - 1e-9
     assert last.sum() == 21

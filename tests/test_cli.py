@@ -198,6 +198,11 @@ BAD_INPUT = [
     ([], "the following arguments are required: COMMAND", None),
     (["run", "nope"], "unknown case 'nope'; available cases: taylor_green", None),
     (["run", "taylor_green", "--dx", "0"], "argument --dx: must be a positive number", None),
+    (
+        ["run", "taylor_green", "--n", "8", "--neighbor-margin=-0.1"],
+        "--neighbor-margin: Model.neighbor_margin must be a finite number >= 0",
+        None,
+    ),  # fmt: skip
     (["run", "taylor_green", "--dx", "-0.1"], "argument --dx: must be a positive number", None),
     (["run", "taylor_green", "--dx", "0.5"], "--dx: dx=0.5 is too coarse", None),
     (["run", "taylor_green", "--n", "0"], "argument --n: must be a positive whole number", None),

@@ -17,11 +17,14 @@ cases.
 
 from __future__ import annotations
 
+import contextlib
+import io
+
 import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
-from _room import lists_with_room, with_room
+from _room import with_room
 
 import sphjax
 from sphjax import Kind
@@ -372,8 +375,7 @@ def test_gate_opens_as_in_the_experiment_early_on():
     case = elastic_gate_dam_break(n=2, substeps="auto")
     n_steps = int(np.ceil(0.081 / case.dt))
     # room for the rows that fill as the water reaches the gate: one compilation, not two
-    with lists_with_room(margin=0.3):
-        traj = sphjax.simulate(with_room(case, 3.0), n_steps=n_steps, save_every=10)
+    traj = sphjax.simulate(with_room(case, 3.0, margin=0.3), n_steps=n_steps, save_every=10)
     t = np.asarray(traj.states.time)
     ux = np.asarray(sphjax.observables.tip_displacement(traj, case))[:, 0]
     assert np.all(np.isfinite(ux))
@@ -533,19 +535,27 @@ GRADIENTS = ("first_order", "second_order")
 OBSTACLE_CI = dict(column_width=0.036, plate_length=0.03)
 
 
+#: ``Model.neighbor_margin`` of the obstacle runs: room for the water that crowds as it
+#: hits the plate (one compilation)
+OBSTACLE_MARGIN = 0.15
+
+
 @pytest.fixture(scope="module")
 def obstacle_run(tmp_path_factory):
     """``sphjax run dam_break_elastic_obstacle`` at CI size past the impact, every 3rd
-    step saved; returns (trajectory, case)."""
+    step saved; returns (trajectory, case, what the command wrote to stderr)."""
     from sphjax.cli import main
 
     out = tmp_path_factory.mktemp("obstacle") / "obstacle.h5"
     args = ["run", "dam_break_elastic_obstacle", "--n", "2", "--t-end", "0.11", "--quiet"]
     args += [a for k, v in OBSTACLE_CI.items() for a in ("--case-arg", f"{k}={v}")]
-    with lists_with_room(margin=0.15):  # the water crowds as it hits: one compilation
+    args += ["--neighbor-margin", str(OBSTACLE_MARGIN)]
+    stderr = io.StringIO()
+    with contextlib.redirect_stderr(stderr):
         assert main([*args, "--save-every", "3", "--out", str(out)]) == 0
     trajectory, _ = sphjax.read_trajectory(out)
-    return trajectory, sphjax.cases.dam_break_elastic_obstacle(n=2, **OBSTACLE_CI)
+    case = sphjax.cases.dam_break_elastic_obstacle(n=2, **OBSTACLE_CI)
+    return trajectory, case, stderr.getvalue()
 
 
 @pytest.mark.slow
@@ -571,7 +581,7 @@ def test_obstacle_budgets_through_the_impact(obstacle_run):
       the saved frames) to 1 % of its largest change."""
     from sphjax import observables
 
-    trajectory, case = obstacle_run
+    trajectory, case, _ = obstacle_run
     position = np.asarray(trajectory.states.position)
     fluid = np.asarray(case.state.kind) == Kind.FLUID
     assert np.all(np.isfinite(position))
@@ -590,6 +600,40 @@ def test_obstacle_budgets_through_the_impact(obstacle_run):
     budget = observables.momentum_budget(trajectory, case)
     dP = budget["momentum"][:, 0] - budget["momentum"][0, 0]
     assert np.max(np.abs(dP - budget["impulse"][:, 0])) < 1e-2 * np.max(np.abs(dP))
+
+
+@pytest.mark.slow
+def test_water_reaches_the_obstacle_without_a_reallocation(obstacle_run, monkeypatch):
+    """The lists between the water and the elastic obstacle are empty at the start (the
+    water has not reached it): a concrete run allocates them at ``OVERFLOW_MIN_SIZE``
+    slots and rows, what their first overflow would grow them to, so the water's arrival
+    re-allocates nothing (the command-line run through the impact notes no
+    re-allocation) and the run equals, to round-off, one whose lists start at one slot and
+    one row (the sizing of a measured count alone), which re-allocates them once, as the
+    water arrives near the end of the 480 steps compared."""
+    from sphjax.neighbors import OVERFLOW_MIN_SIZE, NeighborOverflowWarning, capacity, search
+    from sphjax.physics.rhs import build_neighbors
+
+    trajectory, case, stderr = obstacle_run
+    assert "re-allocated" not in stderr
+    case = with_room(case, capacity=None, margin=OBSTACLE_MARGIN)
+    lists = build_neighbors(case.state, case.model, compact_rows=True, margin=OBSTACLE_MARGIN)
+    widths, rows = dict(lists.capacities), dict(lists.member_capacities)
+    assert widths[(0, 2)] == widths[(2, 0)] == rows[(0, 2)] == OVERFLOW_MIN_SIZE
+    n_steps = 480
+    assert np.isclose(float(trajectory.times[160]), n_steps * case.dt)
+
+    def count_alone(count, multiplier, extra=0, grows=False):
+        return capacity.sized(count, multiplier, extra)
+
+    monkeypatch.setattr(search, "pair_sized", count_alone)
+    with pytest.warns(NeighborOverflowWarning, match="fluid-solid 1 -> 16 slots") as notes:
+        tight = sphjax.simulate(case, n_steps=n_steps, save_every=3)
+    assert len(notes) == 1
+    for name in ("position", "velocity"):
+        expected = np.asarray(getattr(tight.states, name))
+        got = np.asarray(getattr(trajectory.states, name))[: len(expected)]
+        assert np.max(np.abs(got - expected)) < 1e-10 * np.max(np.abs(expected)), name
 
 
 def test_strain_energy_is_exact_for_an_affine_stretch_and_zero_at_rest():

@@ -15,7 +15,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
-from _room import lists_with_room, with_room
+from _room import with_room
 
 import sphjax
 from sphjax.cases import channel_flow
@@ -43,12 +43,11 @@ def channel():
     case = channel_flow(n=10, length=2.0, profile="parabolic")
     save_every = max(1, round(SAMPLE / case.dt))
     # room for the rows that fill against the buffers: one compilation, not two
-    with lists_with_room():
-        trajectory = sphjax.simulate(
-            with_room(case),
-            t_end=FLOW_THROUGHS * case.info["flow_through_time"],
-            save_every=save_every,
-        )
+    trajectory = sphjax.simulate(
+        with_room(case),
+        t_end=FLOW_THROUGHS * case.info["flow_through_time"],
+        save_every=save_every,
+    )
     return case, trajectory
 
 
@@ -136,8 +135,8 @@ def test_the_flow_started_from_a_plug_develops_as_the_series_solution():
         n=20, length=1.5, profile="parabolic", initial_profile="uniform", sound_speed_factor=40.0
     )
     L, H, U, nu = (case.info[k] for k in ("length", "height", "inflow_velocity", "viscosity"))
-    with lists_with_room():  # the rows that fill as the flow starts: one compilation
-        trajectory = sphjax.simulate(with_room(case), t_end=0.3, save_every=round(0.1 / case.dt))
+    # room for the rows that fill as the flow starts: one compilation
+    trajectory = sphjax.simulate(with_room(case), t_end=0.3, save_every=round(0.1 / case.dt))
     errors = []
     for k in range(1, len(trajectory)):
         t = float(trajectory.times[k])

@@ -11,7 +11,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
-from _room import lists_with_room, with_room
+from _room import with_room
 
 import sphjax
 from sphjax.cases import body_bottom, body_velocity, floating_body, settling_disk, sinking_body
@@ -389,8 +389,7 @@ def test_a_disk_settles_at_the_speed_measured_at_that_resolution():
     save_every = round(0.01 / case.dt)
     n_steps = int(round(case.t_end / case.dt)) // save_every * save_every
     # room for the rows that gain neighbours as the disk sinks: one compilation, not two
-    with lists_with_room():
-        trajectory = sphjax.simulate(with_room(case), n_steps=n_steps, save_every=save_every)
+    trajectory = sphjax.simulate(with_room(case), n_steps=n_steps, save_every=save_every)
     t = np.asarray(trajectory.times)
     v = np.asarray(body_velocity(trajectory.states, case))
     speed = -float(v[t >= 0.2, 1].mean())

@@ -14,9 +14,12 @@ recompiles, changing a :class:`~sphjax.Params` value does not.  It holds
 from __future__ import annotations
 
 import dataclasses
+import math
+import numbers
 
 from sphjax.core.kernels import KERNELS, Kernel, QuinticSpline
 from sphjax.core.params import CONTACT_FIELDS, GROUPS, fields, refusal
+from sphjax.neighbors.capacity import NEIGHBOR_MARGIN
 
 #: the values of ``Model.pair_loop``
 PAIR_LOOPS = ("xla", "native")
@@ -61,7 +64,15 @@ class Model:
         (e.g. ``(FluidSystem(...), WallSystem(...))``).
       kernel: smoothing kernel (see :mod:`sphjax.core.kernels`).
       neighbor_capacity: multiplier on the measured neighbour count that sizes each
-        neighbour list; raise it if a run reports a neighbour-list overflow.
+        neighbour list; raise it if a run reports a neighbour-list overflow.  Runs under
+        ``jit``/``grad``/``vmap`` size their lists by it; a concrete ``sphjax.simulate``
+        sizes by it the fluid's rows compacted against a wall or body only.
+      neighbor_margin: room above the largest neighbour count at allocation in the
+        lists of a concrete ``sphjax.simulate``, which re-allocates a list that
+        overflows (a new compilation) and goes on: each list holds ``1 +
+        neighbor_margin`` times that count.  Raise it (e.g. ``0.5``) for a flow that
+        crowds its particles (a lid-driven corner, an impact) to trade a few padded
+        slots for fewer re-allocations; traced runs do not read it.
       neighbor_skin: Verlet skin as a fraction of the support radius; the list is
         rebuilt only when a particle has moved half the skin.
       pair_adjoint: reverse mode through the pair sums uses their custom adjoint (a sum
@@ -84,6 +95,7 @@ class Model:
     systems: tuple
     kernel: Kernel = QuinticSpline()
     neighbor_capacity: float = 1.25
+    neighbor_margin: float = NEIGHBOR_MARGIN
     neighbor_skin: float = 0.25
     pair_adjoint: bool = True
     pair_block: int | None = 2048
@@ -113,6 +125,15 @@ class Model:
             )
         if not self.neighbor_capacity >= 1.0:
             raise ValueError("Model.neighbor_capacity must be >= 1")
+        margin = self.neighbor_margin
+        if isinstance(margin, bool) or not (
+            isinstance(margin, numbers.Real) and math.isfinite(margin) and margin >= 0
+        ):
+            raise ValueError(
+                "Model.neighbor_margin must be a finite number >= 0 (room above the largest "
+                f"neighbour count, e.g. 0.5 for 50 %), got {margin!r}"
+            )
+        object.__setattr__(self, "neighbor_margin", float(margin))
         if not isinstance(self.pair_adjoint, bool):
             raise ValueError(f"Model.pair_adjoint must be True or False, got {self.pair_adjoint!r}")
         if self.pair_block is not None and not (

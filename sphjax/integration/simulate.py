@@ -38,7 +38,6 @@ from sphjax.integration.stepper import stepper_for
 from sphjax.integration.timestep import check_time_step
 from sphjax.neighbors import (
     NEIGHBOR_IDX,
-    NEIGHBOR_MARGIN,
     ListSizes,
     NeighborOverflowError,
     NeighborOverflowWarning,
@@ -569,7 +568,7 @@ def simulate(
             neighbor_state,
             model,
             compact_rows=not traced,
-            margin=None if traced else NEIGHBOR_MARGIN,
+            margin=None if traced else model.neighbor_margin,
         )
     # the solids' reference quantities (L0), once per run, from the (maybe traced) state
     if not all(system.current_configuration for system in model.systems):
@@ -840,8 +839,8 @@ def _run_chunk_growing(
             model,
             extra_capacity=extra[0],
             compact_rows=True,
-            margin=NEIGHBOR_MARGIN,
-            at_least=widest(old, grown(old, needed_sizes(lost, extra[0]))),
+            margin=model.neighbor_margin,
+            at_least=widest(old, grown(old, needed_sizes(lost, extra[0], model.neighbor_margin))),
         )
         neighbors = neighbors.replace(reference=lost.reference)
         carry = (state, neighbors, *carry[2:])

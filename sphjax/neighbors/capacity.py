@@ -33,13 +33,14 @@ __all__ = [
     "grown_multiplier",
     "is_neighbor_overflow",
     "overflow_message",
+    "pair_sized",
     "sized",
     "widest",
 ]
 
 #: room above the largest neighbour count in the lists of a concrete (chunked) run, which
-#: re-allocates on overflow; traced runs (grad, jit) cannot and keep
-#: ``Model.neighbor_capacity``
+#: re-allocates on overflow: the default of ``Model.neighbor_margin``; traced runs (grad,
+#: jit) cannot and keep ``Model.neighbor_capacity``
 NEIGHBOR_MARGIN = 0.05
 #: a list that overflows in the chunked driver grows to at least this factor times its
 #: old size, and to at least ``OVERFLOW_MIN_SIZE`` slots (rows) (:func:`grown`)
@@ -94,6 +95,18 @@ def sized(count: int, multiplier: float, extra: int = 0) -> int:
     return max(1, int(math.ceil(count * multiplier)) + int(extra))
 
 
+def pair_sized(count: int, multiplier: float, extra: int = 0, grows: bool = False) -> int:
+    """The size of a list between two systems (its width, or its compacted rows) for a
+    measured ``count``: :func:`sized`, and with ``grows`` (a list that the chunked driver
+    re-allocates when it overflows) at least :data:`OVERFLOW_MIN_SIZE` while it is empty
+    (a fluid's list against an obstacle it has not reached): its first overflow, when
+    the fluid arrives, would grow it to that size anyway (:func:`grown`) and compile the
+    run anew."""
+    if grows and count == 0:
+        return max(OVERFLOW_MIN_SIZE, sized(count, multiplier, extra))
+    return sized(count, multiplier, extra)
+
+
 class ListSizes(NamedTuple):
     """The sizes a neighbour allocation chose: slots per particle of the search, width
     per pair of systems, compacted rows per pair
@@ -124,8 +137,9 @@ def grown(old: ListSizes, needed: ListSizes) -> ListSizes:
     spreading along a wall, or reaching a structure, brings ever more particles to it)
     and every re-allocation compiles the chunk anew: growing by a factor keeps the
     number of re-allocations logarithmic in the growth, and the floor spares the lists
-    between two systems that start nearly empty (a fluid's against an obstacle it has
-    not reached: 1 slot, 1 row) one re-allocation per few particles that arrive.
+    between two systems that start nearly empty (a fluid's against an obstacle that a
+    few of its particles have reached) one re-allocation per few particles that arrive;
+    a list that starts empty is allocated at the floor (:func:`pair_sized`).
     Widths stay capped by the search's (:func:`sphjax.neighbors.lists.allocate`)."""
 
     def grow(before: dict, after: dict) -> dict:

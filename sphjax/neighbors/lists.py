@@ -202,7 +202,10 @@ def allocate(
     ``margin``: ``None`` sizes every list ``plan.geometry.capacity_multiplier``
     (``Model.neighbor_capacity``) times its largest neighbour count now; a number sizes
     it that count times ``1 + margin`` (the chunked driver, which re-allocates on
-    overflow, asks for a small one).
+    overflow, asks for a small one), and a list between two systems that is empty now
+    (a fluid against an obstacle it has not reached) at least ``OVERFLOW_MIN_SIZE``,
+    what its first overflow would grow it to
+    (:func:`sphjax.neighbors.capacity.pair_sized`).
 
     ``support``: keep a system's list with itself at two levels, the Verlet list and the
     neighbours within ``(1 + SUPPORT_SKIN)`` times the support radius compacted from it
@@ -235,6 +238,7 @@ def allocate(
                     _local(blocks[j], union),
                     multiplier,
                     extra_capacity,
+                    grows=margin is not None,
                 )
                 width = max(width, floor.widths.get((i, j), 0))
                 capacities.append(((i, j), min(width, capacity(search))))
@@ -247,6 +251,7 @@ def allocate(
                 _local(blocks[j], union),
                 geometry.capacity_multiplier,
                 extra_capacity,
+                grows=margin is not None,
             )
             members = max(members, floor.members.get((i, j), 0))
             if members < _COMPACT_BELOW * _size(blocks[i]):
@@ -496,14 +501,14 @@ def _size(block):
     return block[1] - block[0]
 
 
-def needed_sizes(neighbors: Neighbors, extra: int) -> ListSizes:
+def needed_sizes(neighbors: Neighbors, extra: int, margin: float = NEIGHBOR_MARGIN) -> ListSizes:
     """The split and compacted list sizes for the counts ``neighbors`` met (sized as an
-    allocation of the chunked driver sizes them from the counts it measures), for
-    :func:`sphjax.neighbors.capacity.grown`."""
+    allocation of the chunked driver with ``margin``, ``Model.neighbor_margin``, sizes
+    them from the counts it measures), for :func:`sphjax.neighbors.capacity.grown`."""
     counts = [int(c) for c in np.asarray(neighbors.counts)]
     width = len(neighbors.capacities)
     widths = {
-        key: int(math.ceil(c * (1.0 + NEIGHBOR_MARGIN))) + extra
+        key: int(math.ceil(c * (1.0 + margin))) + extra
         for (key, _), c in zip(neighbors.capacities, counts[:width], strict=True)
     }
     multiplier = neighbors.plan.geometry.capacity_multiplier

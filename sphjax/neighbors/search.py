@@ -32,7 +32,7 @@ import numpy as np
 
 from sphjax._jax_md import modules as _jax_md_modules
 from sphjax.core.space import displacement_fn
-from sphjax.neighbors.capacity import sized
+from sphjax.neighbors.capacity import pair_sized, sized
 
 partition, jmd_space = _jax_md_modules("partition", "space")
 
@@ -486,12 +486,15 @@ def split_list(union_idx, rows: tuple[int, int], cols: tuple[int, int], capacity
     return jnp.take_along_axis(local, order, axis=1), overflow
 
 
-def measured_capacity(union_idx, rows, cols, multiplier: float, extra: int = 0) -> int:
+def measured_capacity(
+    union_idx, rows, cols, multiplier: float, extra: int = 0, grows: bool = False
+) -> int:
     """List width for ``rows`` against ``cols``: the largest neighbour count in
-    ``union_idx`` (concrete) times ``multiplier``, plus ``extra``."""
+    ``union_idx`` (concrete) times ``multiplier``, plus ``extra``; ``grows``: see
+    :func:`sphjax.neighbors.capacity.pair_sized`."""
     block = np.asarray(union_idx[rows[0] : rows[1]])
     inside = (block >= cols[0]) & (block < cols[1])
-    return sized(int(inside.sum(axis=1).max(initial=0)), multiplier, extra)
+    return pair_sized(int(inside.sum(axis=1).max(initial=0)), multiplier, extra, grows)
 
 
 def compact_rows(idx, n_cols: int, capacity: int):
@@ -518,12 +521,15 @@ def compact_rows(idx, n_cols: int, capacity: int):
     return members, packed.astype(jnp.int32), position, jnp.sum(has) > capacity
 
 
-def measured_members(union_idx, rows, cols, multiplier: float, extra: int = 0) -> int:
+def measured_members(
+    union_idx, rows, cols, multiplier: float, extra: int = 0, grows: bool = False
+) -> int:
     """How many rows of ``rows`` have a neighbour in ``cols`` (concrete ``union_idx``),
-    times ``multiplier``, plus ``extra``: the capacity of :func:`compact_rows`."""
+    times ``multiplier``, plus ``extra``: the capacity of :func:`compact_rows`;
+    ``grows``: see :func:`sphjax.neighbors.capacity.pair_sized`."""
     block = np.asarray(union_idx[rows[0] : rows[1]])
     inside = (block >= cols[0]) & (block < cols[1])
-    return sized(int(inside.any(axis=1).sum()), multiplier, extra)
+    return pair_sized(int(inside.any(axis=1).sum()), multiplier, extra, grows)
 
 
 def support_list(idx, x_rows, x_cols, domain, cutoff: float, width: int):
