@@ -85,8 +85,9 @@ class Model:
       pair_loop: ``"xla"`` (default) evaluates every pair sum in XLA, each pair from
         both sides; ``"native"`` evaluates the fluid's own density and momentum sums
         with the compiled loops of :mod:`sphjax.native` (each pair once, threads over
-        rows; the CPU only, built with the machine's C++ compiler at first use).
-        Derivatives are the same either way: they always go through XLA.
+        rows; the CPU only, built with the machine's C++ compiler at first use), and
+        rebuilds the neighbour list with its compiled cell list (the same list as
+        jax-md's).  Derivatives are the same either way: they always go through XLA.
     """
 
     dim: int
