@@ -49,7 +49,7 @@ from sphjax.core.kernels import KERNELS
 #: the library's sources: the pair sums and the neighbour search's cell list
 SOURCES = tuple(Path(__file__).with_name(name) for name in ("pair_sums.cc", "cell_list.cc"))
 #: the headers they include (part of the build's key)
-HEADERS = (Path(__file__).with_name("threads.h"),)
+HEADERS = tuple(Path(__file__).with_name(name) for name in ("threads.h", "pair_loop.h"))
 FLAGS = (
     "-O3",
     "-march=native",
