@@ -184,7 +184,9 @@ void each_pair_once(ffi::ThreadPool* pool, const Setting<T>& s, const T* x, cons
 // (the Term's weight included) over a list whose entries index the columns (padded with
 // n_cols or more), each pair from a's side only, so threads write their own rows and
 // need no copies.  `rows` reads a (Term::row), `columns` reads b (Term::load) and
-// evaluates the pair (Term::pair; its numbers for b are dropped).
+// evaluates the pair (Term::pair; its numbers for b are dropped).  Its gathering repeats
+// each_pair_once's on purpose: with both in one shared helper GCC left the momentum's
+// pair loop scalar (no AVX instruction in it; -fopt-info-vec: "control flow in loop").
 template <typename T, int D, int Kernel, typename Term>
 void rows_against_columns(ffi::ThreadPool* pool, const Setting<T>& s, const T* x_rows,
                           const T* x_columns, const int32_t* idx, int64_t n_rows,
