@@ -3,31 +3,44 @@
 #pragma once
 
 #include <algorithm>
+#include <atomic>
 #include <condition_variable>
 #include <cstdint>
 #include <cstdlib>
+#include <memory>
 #include <mutex>
 
 #include "xla/ffi/api/ffi.h"
 
 namespace sphjax_native {
 
-// Run body(t) for t < threads: t = 0 on the calling thread, the others on XLA's CPU pool,
-// and wait for them.
+// Run body(t) for t < threads: the calling thread takes parts t in turn until none is left,
+// and XLA's CPU pool is asked for threads - 1 helpers that take parts too.  The caller
+// waits only for parts a helper has taken (they are running), never for a helper to
+// start: XLA may run two of our calls at once on its only two threads, and each waiting
+// for the other's pool would never return.  A helper that starts after every part is
+// taken returns at once, touching only the shared counters (kept alive by the helpers).
 template <typename Body>
 void in_parallel(xla::ffi::ThreadPool* pool, int64_t threads, Body body) {
-  std::mutex mutex;
-  std::condition_variable done;
-  int64_t remaining = threads - 1;
-  for (int64_t t = 1; t < threads; t++)
-    pool->Schedule([&, t] {
-      body(t);
-      std::lock_guard<std::mutex> lock(mutex);
-      if (--remaining == 0) done.notify_one();
-    });
-  body(0);
-  std::unique_lock<std::mutex> lock(mutex);
-  done.wait(lock, [&] { return remaining == 0; });
+  struct Parts {
+    std::atomic<int64_t> next{0};
+    int64_t done = 0;
+    std::mutex mutex;
+    std::condition_variable finished;
+  };
+  auto parts = std::make_shared<Parts>();
+  Body* work = &body;
+  auto take = [threads](const std::shared_ptr<Parts>& parts, Body* work) {
+    for (int64_t t = parts->next.fetch_add(1); t < threads; t = parts->next.fetch_add(1)) {
+      (*work)(t);
+      std::lock_guard<std::mutex> lock(parts->mutex);
+      if (++parts->done == threads) parts->finished.notify_one();
+    }
+  };
+  for (int64_t t = 1; t < threads; t++) pool->Schedule([parts, work, take] { take(parts, work); });
+  take(parts, work);
+  std::unique_lock<std::mutex> lock(parts->mutex);
+  parts->finished.wait(lock, [&] { return parts->done == threads; });
 }
 
 // How many threads share n rows: XLA's pool's size (at most $SPHJAX_NATIVE_THREADS), at
