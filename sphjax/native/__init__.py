@@ -13,6 +13,12 @@ compiled step as XLA foreign functions (``jax.ffi``):
 * ``continuity_molteni``: eq. 11 with Molteni & Colagrossi's density diffusion;
 * ``momentum``: eq. 10's pressure term with Monaghan's ``Pi_ab`` and Morris' viscosity.
 
+``solid_sums.cc`` has the two pair sums of an elastic solid (total-Lagrangian SPH) over
+its reference neighbours, the pair geometry recomputed from the reference positions:
+
+* ``solid_deformation``: the deformation gradient ``F`` (eq. 16);
+* ``solid_momentum``: eq. 14's elastic pair forces with Ganzenmüller's penalty force.
+
 ``cell_list.cc`` rebuilds the neighbour search's list (:func:`cell_list_rebuild`, used by
 :class:`sphjax.neighbors.NeighborSearch` when ``SearchGeometry.native``): a counting sort
 into cells at least as wide as the search radius and a scan of the cells around each
@@ -46,8 +52,11 @@ import numpy as np
 
 from sphjax.core.kernels import KERNELS
 
-#: the library's sources: the pair sums and the neighbour search's cell list
-SOURCES = tuple(Path(__file__).with_name(name) for name in ("pair_sums.cc", "cell_list.cc"))
+#: the library's sources: the pair sums (a fluid's, a solid's) and the neighbour search's
+#: cell list
+SOURCES = tuple(
+    Path(__file__).with_name(name) for name in ("pair_sums.cc", "solid_sums.cc", "cell_list.cc")
+)
 #: the headers they include (part of the build's key)
 HEADERS = tuple(Path(__file__).with_name(name) for name in ("threads.h", "pair_loop.h"))
 FLAGS = (
@@ -61,12 +70,15 @@ FLAGS = (
     "-fPIC",
     "-pthread",
 )
-#: the handlers of ``pair_sums.cc`` and ``cell_list.cc``: XLA target name -> exported symbol
+#: the handlers of ``pair_sums.cc``, ``solid_sums.cc`` and ``cell_list.cc``: XLA target name
+#: -> exported symbol
 TARGETS = {
     "sphjax_kernel_sum": "SphjaxKernelSum",
     "sphjax_velocity_divergence": "SphjaxVelocityDivergence",
     "sphjax_continuity_molteni": "SphjaxContinuityMolteni",
     "sphjax_momentum": "SphjaxMomentum",
+    "sphjax_solid_deformation": "SphjaxSolidDeformation",
+    "sphjax_solid_momentum": "SphjaxSolidMomentum",
     "sphjax_cell_list_rebuild": "SphjaxCellListRebuild",
 }
 #: the kernels ``pair_sums.cc`` knows, by name (its ids)
@@ -249,6 +261,52 @@ def momentum(x, v, m, rho, p, idx, geometry, parameters, *, artificial: bool, mo
         *scalars,
         artificial=bool(artificial),
         morris=bool(morris),
+    )
+
+
+def solid_deformation(X, x, V, L0, idx, geometry):
+    """The deformation gradient ``F_a = -sum_b V0_b x_ab (L0_a grad0_a W(X_ab))^T``
+    (eq. 16), ``[N, d, d]``, over the symmetric reference list ``idx``.
+
+    Args:
+      X: ``[N, d]`` reference positions (the pair geometry: ``X_ab``, ``grad0_a W``).
+      x: ``[N, d]`` current positions (``x_ab``, minimum image).
+      V: ``[N]`` reference volumes ``V0``.
+      L0: ``[N, d, d]`` the correction matrices (eq. 15).
+    """
+    n, d = X.shape
+    return _call("sphjax_solid_deformation", (n, d, d), X.dtype, geometry, X, x, V, L0, _list(idx))
+
+
+def solid_momentum(X, x, V, PL0, F, idx, geometry, parameters, *, penalty: bool):
+    """Eq. 14's pair terms per unit of the rows' own mass, ``[N, d]``:
+    ``sum_b V0_b [(P L0)_a + (P L0)_b] grad0_a W(X_ab) / rho0`` plus, with ``penalty``,
+    Ganzenmüller's (2015) hourglass force ``f^PF_a / m0_a``
+    (:func:`sphjax.physics.solid.penalty.penalty_force`), over the symmetric reference list
+    ``idx``.
+
+    Args:
+      X, x: ``[N, d]`` reference and current positions.
+      V: ``[N]`` reference volumes.
+      PL0: ``[N, d, d]`` ``P_a L0_a``, the first Piola-Kirchhoff stress times eq. 15's
+        correction.
+      F: ``[N, d, d]`` deformation gradients (read by the penalty force only).
+      parameters: ``(solid_density, young_modulus, penalty_alpha)``.
+    """
+    scalars = [jax.numpy.asarray(q, X.dtype) for q in parameters]
+    return _call(
+        "sphjax_solid_momentum",
+        X.shape,
+        X.dtype,
+        geometry,
+        X,
+        x,
+        V,
+        PL0,
+        F,
+        _list(idx),
+        *scalars,
+        penalty=bool(penalty),
     )
 
 
