@@ -32,6 +32,7 @@ from typing import Any
 
 import jax.numpy as jnp
 
+from sphjax import native
 from sphjax.core.params import CONTACT_FIELDS, SOLID_DEFAULTS, fields_read, refusal
 from sphjax.core.space import displacement_fn
 from sphjax.core.state import Kind
@@ -104,6 +105,9 @@ class SolidSystem:
     stage = 2
     #: the Params group it reads
     params_group = "solid"
+
+    #: its own pair sums have compiled loops (``Model.pair_loop="native"``)
+    native_pair_sums = True
 
     def __post_init__(self):
         if not hasattr(self.material, "pk1"):
@@ -270,6 +274,21 @@ pair_sums.define_pullback(_deformation_summand, _deformation_pullback)
 # the oscillating plate n = 16 (docs/performance_gradients.md); the pull-back stays, tested,
 # for `benchmarks/pair_costs.py` to re-measure on other hardware
 pair_sums.transpose_by_autodiff(_deformation_summand)
+
+
+def _deformation_loop(keywords, geometry, weight, parity):
+    """The compiled loop of :func:`_deformation_summand` (eq. 16): the pair terms
+    ``-V0_b x_ab grad0_a W^T`` each pair once, ``L0_a`` applied after the sum."""
+    if weight is not None or keywords["domain"] != geometry.domain:
+        return None
+
+    def loop(rows, idx, shared):
+        return native.solid_deformation(rows["x"], rows["xc"], rows["V"], rows["L0"], idx, geometry)
+
+    return loop
+
+
+pair_sums.define_native(_deformation_summand, _deformation_loop)
 
 
 def _second_order_moment_summand(pair, a, b, shared, *, h):
