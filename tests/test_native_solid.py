@@ -6,12 +6,15 @@ XLA's."""
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 
+import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
 
+import sphjax
 from sphjax import Domain, Kind, Model, SolidSystem, make_state, native
 from sphjax.core.kernels import KERNELS
 from sphjax.physics import interactions, rhs
@@ -96,3 +99,117 @@ def test_native_solid_sums_equal_xla_to_round_off(dim, kernel, periodic):
         assert relative(loop, xla["a"]) < 1e-12, penalty
         accelerations.append(xla["a"])
     assert relative(accelerations[1], accelerations[0]) > 1e-2  # the penalty force counts
+
+
+def natively(case):
+    return case.replace(model=dataclasses.replace(case.model, pair_loop="native"))
+
+
+def compiled_loops(case) -> set:
+    """The compiled loops one evaluation of ``case`` calls (the FFI targets in its
+    program)."""
+    neighbors = rhs.with_reference(
+        case.state, rhs.build_neighbors(case.state, case.model), case.model
+    )
+    program = str(
+        jax.make_jaxpr(lambda s: rhs.evaluate(s, neighbors, case.model, case.params))(case.state)
+    )
+    return {target for target in native.TARGETS if target in program}
+
+
+def plate(**options):
+    """The oscillating plate at 4 particles through its thickness (float64), with
+    Ganzenmüller's penalty force: both solid sums and their penalty term in every step."""
+    return sphjax.cases.oscillating_plate(n=4, penalty_alpha=0.1, **options)
+
+
+def test_which_solid_sums_are_compiled():
+    """The momentum with the penalty force goes through its compiled loop; the
+    deformation gradient and the momentum without the penalty stay XLA's sums over the
+    stored reference geometry (faster there)."""
+    assert compiled_loops(natively(plate())) == {"sphjax_solid_momentum"}
+    assert compiled_loops(natively(sphjax.cases.oscillating_plate(n=4))) == set()
+
+
+def test_a_native_plate_run_follows_the_xla_run():
+    """60 steps of the plate: positions and velocities within 1e-10 of XLA's run,
+    relative to their largest entries (float64); the plate has moved."""
+    case = plate()
+    xla = sphjax.simulate(case, n_steps=60).final
+    loops = sphjax.simulate(natively(case), n_steps=60).final
+    assert relative(xla.position, case.state.position) > 1e-4
+    assert relative(loops.position, xla.position) < 1e-10
+    assert relative(loops.velocity, xla.velocity) < 1e-10
+
+
+def test_derivatives_through_a_native_plate_run_are_xlas():
+    """Reverse mode through 10 steps of the plate (checkpointed) with respect to Young's
+    modulus, the initial positions and the reference positions (from which the
+    reference geometry and ``L0`` are computed) equals XLA's to 1e-10."""
+    case = plate()
+
+    def loss(case, young_modulus, position, reference):
+        params = case.params.replace(young_modulus=young_modulus)
+        state = case.state.replace(position=position, reference_position=reference)
+        final = sphjax.simulate(case, params, n_steps=10, state=state, checkpoint_every=5).final
+        return jnp.sum(final.mass * jnp.sum(final.velocity**2, -1))
+
+    arguments = (
+        case.params.young_modulus,
+        case.state.position,
+        case.state.reference_position,
+    )
+    grads = [jax.grad(loss, argnums=(1, 2, 3))(c, *arguments) for c in (case, natively(case))]
+    for native_grad, xla_grad in zip(grads[1], grads[0], strict=True):
+        assert float(np.abs(np.asarray(xla_grad)).max()) > 0
+        assert relative(native_grad, xla_grad) < 1e-10
+
+
+def test_the_second_order_correction_runs_in_xla_under_native():
+    """``gradient_correction="second_order"`` has no compiled loop: under
+    ``pair_loop="native"`` its sums stay XLA's and the run equals XLA's (1e-10)."""
+    case = plate()
+    solid = case.model.systems[0].replace(gradient_correction="second_order")
+    case = case.replace(model=dataclasses.replace(case.model, systems=(solid,)))
+    assert not compiled_loops(natively(case))
+    xla = sphjax.simulate(case, n_steps=20).final
+    loops = sphjax.simulate(natively(case), n_steps=20).final
+    assert relative(loops.position, xla.position) < 1e-10
+    assert relative(loops.velocity, xla.velocity) < 1e-10
+
+
+def test_native_solid_sums_batch_under_vmap():
+    """``jax.vmap`` over two Young's moduli of a deformed plate: each row equals its own
+    native evaluation, and the rows differ (the modulus reached the loops)."""
+    case = natively(plate())
+    state = case.state.replace(
+        position=case.state.position + 1e-3 * jnp.sin(40.0 * case.state.position[:, ::-1])
+    )
+    neighbors = rhs.with_reference(state, rhs.build_neighbors(state, case.model), case.model)
+
+    def acceleration(young_modulus):
+        params = case.params.replace(young_modulus=young_modulus)
+        return rhs.evaluate(state, neighbors, case.model, params).acceleration
+
+    moduli = jnp.stack([case.params.young_modulus, 3.0 * case.params.young_modulus])
+    batched = jax.vmap(acceleration)(moduli)
+    for k in range(2):
+        assert relative(batched[k], acceleration(moduli[k])) < 1e-12
+    assert relative(batched[0], batched[1]) > 1e-2
+
+
+def test_a_native_fsi_run_follows_the_xla_run():
+    """The dam break against an elastic obstacle with the penalty force (fluid, walls,
+    solid; CI size): 40 steps with ``pair_loop="native"`` (the fluid's and the solid's
+    own momentum sums compiled) equal XLA's run to 1e-10."""
+    case = sphjax.cases.dam_break_elastic_obstacle(n=2, column_width=0.036, plate_length=0.03)
+    fluid, wall, solid = case.model.systems
+    model = dataclasses.replace(
+        case.model, systems=(fluid, wall, solid.replace(penalty=sphjax.PenaltyForce()))
+    )
+    case = case.replace(model=model, params=case.params.replace(penalty_alpha=0.1))
+    assert {"sphjax_solid_momentum", "sphjax_momentum"} <= compiled_loops(natively(case))
+    xla = sphjax.simulate(case, n_steps=40).final
+    loops = sphjax.simulate(natively(case), n_steps=40).final
+    assert relative(loops.position, xla.position) < 1e-10
+    assert relative(loops.velocity, xla.velocity) < 1e-10

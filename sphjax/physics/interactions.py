@@ -322,9 +322,13 @@ pair_sums.define_pullback(_solid_summand, _solid_pullback)
 
 
 def _solid_loop(keywords, geometry, weight, parity):
-    """The compiled loop of :func:`_solid_summand` (eq. 14 with the optional penalty
-    force), each pair once."""
-    if weight != "V" or parity != -1 or keywords["domain"] != geometry.domain:
+    """The compiled loop of :func:`_solid_summand` with Ganzenmüller's penalty force
+    (eq. 14), each pair once; ``None`` without the penalty force, whose elastic term alone
+    XLA sums faster over the reference geometry stored once per run (measured on the
+    oscillating plate, docs/performance.md)."""
+    if not keywords["penalty"] or weight != "V" or parity != -1:
+        return None
+    if keywords["domain"] != geometry.domain:
         return None
 
     def loop(rows, idx, shared):

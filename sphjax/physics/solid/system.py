@@ -32,7 +32,6 @@ from typing import Any
 
 import jax.numpy as jnp
 
-from sphjax import native
 from sphjax.core.params import CONTACT_FIELDS, SOLID_DEFAULTS, fields_read, refusal
 from sphjax.core.space import displacement_fn
 from sphjax.core.state import Kind
@@ -275,20 +274,9 @@ pair_sums.define_pullback(_deformation_summand, _deformation_pullback)
 # for `benchmarks/pair_costs.py` to re-measure on other hardware
 pair_sums.transpose_by_autodiff(_deformation_summand)
 
-
-def _deformation_loop(keywords, geometry, weight, parity):
-    """The compiled loop of :func:`_deformation_summand` (eq. 16): the pair terms
-    ``-V0_b x_ab grad0_a W^T`` each pair once, ``L0_a`` applied after the sum."""
-    if weight is not None or keywords["domain"] != geometry.domain:
-        return None
-
-    def loop(rows, idx, shared):
-        return native.solid_deformation(rows["x"], rows["xc"], rows["V"], rows["L0"], idx, geometry)
-
-    return loop
-
-
-pair_sums.define_native(_deformation_summand, _deformation_loop)
+# no compiled loop here (sphjax.native.solid_deformation has one, each pair once): with the
+# reference geometry stored once per run, XLA's sum is faster on the CPU (the oscillating
+# plate n = 32: 0.2 CPU-ms per sum against 0.9; docs/performance.md)
 
 
 def _second_order_moment_summand(pair, a, b, shared, *, h):
