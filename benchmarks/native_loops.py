@@ -12,12 +12,12 @@ defaults: continuity density with Molteni & Colagrossi's diffusion, Monaghan vis
 no-slip walls), ``abc32`` (3D ABC flow at 32^3 without transport velocity), ``plate``
 (the oscillating plate ``n = 32`` of ``solid_throughput.py``, 10k solid particles,
 Wendland C2), ``plate_penalty`` (the same with Ganzenmüller's penalty force, alpha
-0.1).  Prints, per case, the best wall-clock and CPU milliseconds per step of each loop and the ratios
-(xla / native: above 1 means the native loops are faster), and the load average before
-and after.  ``--baseline DIR`` also runs ``pair_loop="native"`` with the sphjax of another
-checkout (e.g. a git worktree of an earlier commit), alternating with the others, and
-adds its figures and the ratio baseline / native.  A benchmark reports; it asserts
-nothing.
+0.1).  Prints, per case, the best wall-clock and CPU milliseconds per step of each loop
+and the ratios (xla / native: above 1 means the native loops are faster), and the load
+average before and after.  ``--baseline DIR`` also runs ``pair_loop="native"`` with the
+sphjax of another checkout (e.g. a git worktree of an earlier commit), alternating with
+the others, and adds its figures and the ratio baseline / native.  A benchmark reports;
+it asserts nothing.
 """
 
 from __future__ import annotations

@@ -56,6 +56,14 @@ CASES = {
     ),
     # delta-SPH of Molteni & Colagrossi (both roles of each pair in the loop), quintic
     "dam_break_molteni": lambda: sphjax.cases.dam_break(n=10),
+    # summation density against no-slip walls, one of them sliding (the lid), Morris
+    "cavity": lambda: sphjax.cases.lid_driven_cavity(n=12, transport_velocity=False),
+    # the fluid against an elastic plate's particles (fluid-solid momentum in the loop)
+    "fsi_plate": lambda: sphjax.cases.hydrostatic_fsi_plate(n=4),
+    # a rigid body's particles as the fluid's moving boundary
+    "settling_disk": lambda: sphjax.cases.settling_disk(n=6),
+    # inflow and outflow buffers (fluid-open boundary momentum in the loop)
+    "channel_flow": lambda: sphjax.cases.channel_flow(n=8),
     # 3D, Wendland C4
     "abc_flow_3d": lambda: sphjax.cases.abc_flow_3d(
         n=6, kernel="wendland_c4", transport_velocity=False, relax_iterations=10
@@ -81,6 +89,54 @@ def test_native_sums_equal_xla_to_round_off(name):
         expected = getattr(xla, field)
         if np.abs(np.asarray(expected)).max() > 0:
             assert relative(getattr(loops, field), expected) < 1e-12, field
+
+
+def _native_calls(case) -> dict[str, int]:
+    """How many times one evaluation of ``case`` calls each native handler."""
+    neighbors = rhs.build_neighbors(case.state, case.model)
+    text = str(
+        jax.make_jaxpr(lambda s: rhs.evaluate(s, neighbors, case.model, case.params))(case.state)
+    )
+    names = [part.split()[0].rstrip(",]") for part in text.split("target_name=")[1:]]
+    return {name: names.count(name) for name in names}
+
+
+def test_the_walls_sums_run_in_the_loops():
+    """A dam break's sums between the fluid and its walls (the walls' extrapolation, the
+    fluid's density rate and momentum against them) are native calls beside the fluid's
+    own; so are the summation density against a cavity's walls and the momentum against
+    a plate's particles."""
+    dam = _native_calls(natively(CASES["dam_break"]()))
+    assert dam == {
+        "sphjax_extrapolation": 1,
+        "sphjax_velocity_divergence": 2,
+        "sphjax_momentum": 2,
+    }, dam
+    cavity = _native_calls(natively(CASES["cavity"]()))
+    assert cavity["sphjax_kernel_sum"] == 2 and cavity["sphjax_momentum"] == 2, cavity
+    fsi = _native_calls(natively(CASES["fsi_plate"]()))
+    assert fsi["sphjax_momentum"] == 3, fsi  # fluid-fluid, fluid-wall, fluid-plate
+
+
+def test_derivatives_through_native_walls_are_xlas():
+    """Reverse mode through 10 steps of a native dam break (walls, Molteni's diffusion)
+    equals that through the XLA run to round-off."""
+    case = CASES["dam_break_molteni"]()
+
+    def loss(case, alpha, velocity):
+        params = case.params.replace(artificial_alpha=alpha)
+        state = case.state.replace(velocity=velocity)
+        final = sphjax.simulate(case, params, n_steps=10, state=state).final
+        return jnp.sum(final.mass * final.position[:, 1])
+
+    alpha, v = case.params.artificial_alpha, case.state.velocity
+    grads = [
+        jax.jit(jax.grad(lambda a, v, c=c: loss(c, a, v), argnums=(0, 1)))(alpha, v)
+        for c in (case, natively(case))
+    ]
+    assert relative(grads[1][0], grads[0][0]) < 1e-10
+    assert relative(grads[1][1], grads[0][1]) < 1e-10
+    assert np.abs(np.asarray(grads[0][1])).max() > 0
 
 
 def test_a_native_run_follows_the_xla_run():

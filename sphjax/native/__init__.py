@@ -11,7 +11,13 @@ compiled step as XLA foreign functions (``jax.ffi``):
 * ``kernel_sum``: ``sum_b m_b W_ab`` (eq. 5 without the self term);
 * ``velocity_divergence``: ``sum_b m_b (v_a - v_b) . grad_a W_ab`` (eq. 11);
 * ``continuity_molteni``: eq. 11 with Molteni & Colagrossi's density diffusion;
-* ``momentum``: eq. 10's pressure term with Monaghan's ``Pi_ab`` and Morris' viscosity.
+* ``momentum``: eq. 10's pressure term with Monaghan's ``Pi_ab`` and Morris' viscosity;
+* ``extrapolation``: Adami et al.'s sums onto wall particles from the fluid.
+
+The kernel sum, the velocity divergence and the momentum also run between two systems
+(a fluid's rows against its walls' columns, over the walls' compacted lists): each pair
+from the row's side, rows shared between threads, which spares XLA's gathers of the
+neighbours' fields and its per-pair temporaries.
 
 ``solid_sums.cc`` has the two pair sums of an elastic solid (total-Lagrangian SPH) over
 its reference neighbours, the pair geometry recomputed from the reference positions:
@@ -77,6 +83,7 @@ TARGETS = {
     "sphjax_velocity_divergence": "SphjaxVelocityDivergence",
     "sphjax_continuity_molteni": "SphjaxContinuityMolteni",
     "sphjax_momentum": "SphjaxMomentum",
+    "sphjax_extrapolation": "SphjaxExtrapolation",
     "sphjax_solid_deformation": "SphjaxSolidDeformation",
     "sphjax_solid_momentum": "SphjaxSolidMomentum",
     "sphjax_cell_list_rebuild": "SphjaxCellListRebuild",
@@ -197,7 +204,16 @@ def _attributes(geometry) -> dict:
     )
 
 
-def _call(target, shape, dtype, geometry, *args, **attributes):
+def _call(target, shape, dtype, geometry, *args, cross: bool = False, **attributes):
+    register()
+    result = jax.ShapeDtypeStruct(shape, dtype)
+    call = jax.ffi.ffi_call(target, result, vmap_method="sequential")
+    return call(*args, **_attributes(geometry), cross=bool(cross), **attributes)
+
+
+def _within(target, shape, dtype, geometry, *args, **attributes):
+    """:func:`_call` of a handler that sums within one system only (``solid_sums.cc``: no
+    ``cross`` attribute)."""
     register()
     result = jax.ShapeDtypeStruct(shape, dtype)
     call = jax.ffi.ffi_call(target, result, vmap_method="sequential")
@@ -208,59 +224,95 @@ def _list(idx):
     return idx.astype(np.int32)
 
 
-def kernel_sum(x, m, idx, geometry):
-    """``sum_b m_b W_ab`` over the symmetric list ``idx`` (``[N]``; no self term)."""
-    return _call("sphjax_kernel_sum", m.shape, x.dtype, geometry, x, m, _list(idx))
+def _sides(rows: dict, columns: dict | None, keys: str):
+    """The fields ``keys`` of the rows, then of the columns (the rows again within one
+    system), and whether the sum is between two systems."""
+    other = rows if columns is None else columns
+    fields = keys.split()
+    return [rows[k] for k in fields] + [other[k] for k in fields], columns is not None
 
 
-def velocity_divergence(x, v, m, idx, geometry):
-    """``sum_b m_b (v_a - v_b) . grad_a W_ab`` over the symmetric list ``idx`` (``[N]``)."""
-    return _call("sphjax_velocity_divergence", m.shape, x.dtype, geometry, x, v, m, _list(idx))
+def kernel_sum(rows, idx, geometry, columns=None):
+    """``sum_b m_b W_ab`` (``[N]``; no self term) over ``idx``: within one system
+    (``columns=None``; the list symmetric, each pair once) or the rows against the
+    ``columns`` of another (fields ``x``, ``m``)."""
+    fields, cross = _sides(rows, columns, "x m")
+    m = rows["m"]
+    return _call("sphjax_kernel_sum", m.shape, m.dtype, geometry, *fields, _list(idx), cross=cross)
 
 
-def continuity_molteni(x, v, m, rho, idx, geometry, parameters):
+def velocity_divergence(rows, idx, geometry, columns=None):
+    """``sum_b m_b (v_a - v_b) . grad_a W_ab`` (``[N]``, eq. 11) over ``idx``, within one
+    system or against ``columns`` (fields ``x``, ``v``, ``m``; see :func:`kernel_sum`)."""
+    fields, cross = _sides(rows, columns, "x v m")
+    m = rows["m"]
+    return _call(
+        "sphjax_velocity_divergence", m.shape, m.dtype, geometry, *fields, _list(idx), cross=cross
+    )
+
+
+def continuity_molteni(rows, idx, geometry, parameters):
     """Eq. 11 with Molteni & Colagrossi's density diffusion, its hydrostatic part removed
     (:func:`sphjax.physics.fluid.density_diffusion.molteni_term`), over the symmetric list
-    ``idx`` (``[N]``).  ``parameters``: ``(gravity [d], reference_density, sound_speed,
-    density_diffusion)``."""
+    ``idx`` of one fluid (``[N]``; fields ``x, v, m, rho``).  ``parameters``: ``(gravity
+    [d], reference_density, sound_speed, density_diffusion)``."""
+    x = rows["x"]
     gravity, *scalars = (jax.numpy.asarray(q, x.dtype) for q in parameters)
+    fields = [rows[k] for k in ("x", "v", "m", "rho")]
     return _call(
         "sphjax_continuity_molteni",
-        m.shape,
+        rows["m"].shape,
         x.dtype,
         geometry,
-        x,
-        v,
-        m,
-        rho,
+        *fields,
         _list(idx),
         gravity,
         *scalars,
     )
 
 
-def momentum(x, v, m, rho, p, idx, geometry, parameters, *, artificial: bool, morris: bool):
+def momentum(rows, idx, geometry, parameters, *, artificial: bool, morris: bool, columns=None):
     """Eq. 10's pair terms per unit of the rows' own mass, ``[N, d]``:
-    ``sum_b m_b [-(p_a/rho_a^2 + p_b/rho_b^2 + Pi_ab) grad_a W_ab + Morris]``.
+    ``sum_b m_b [-(p_a/rho_a^2 + p_b/rho_b^2 + Pi_ab) grad_a W_ab + Morris]``, within one
+    system or against ``columns`` (fields ``x, v, m, rho, p``; see :func:`kernel_sum`;
+    ``v`` of the columns is the velocity the viscous terms see).
 
     ``parameters``: ``(sound_speed, artificial_alpha, artificial_beta,
     kinematic_viscosity)`` (arrays of the run's dtype); ``artificial``, ``morris``: which
     viscous terms (Monaghan's ``Pi_ab``, Morris et al. 1997)."""
+    x = rows["x"]
     scalars = [jax.numpy.asarray(q, x.dtype) for q in parameters]
+    fields, cross = _sides(rows, columns, "x v m rho p")
     return _call(
         "sphjax_momentum",
         x.shape,
         x.dtype,
         geometry,
-        x,
-        v,
-        m,
-        rho,
-        p,
+        *fields,
         _list(idx),
         *scalars,
+        cross=cross,
         artificial=bool(artificial),
         morris=bool(morris),
+    )
+
+
+def extrapolation(rows, idx, geometry, columns):
+    """Adami et al.'s sums onto boundary particles (the rows, field ``x``) from their fluid
+    neighbours (``columns``: ``x, p, rho, v``): ``[N, 2 + 2 d]`` holding ``sum_b W_ab``,
+    ``sum_b p_b W_ab``, ``sum_b rho_b W_ab r_ab`` and ``sum_b W_ab v_b``
+    (:func:`sphjax.physics.boundary.wall.extrapolation_terms`)."""
+    x = rows["x"]
+    n, dim = x.shape
+    fields = [x] + [columns[k] for k in ("x", "p", "rho", "v")]
+    return _call(
+        "sphjax_extrapolation",
+        (n, 2 + 2 * dim),
+        x.dtype,
+        geometry,
+        *fields,
+        _list(idx),
+        cross=True,
     )
 
 
@@ -275,7 +327,9 @@ def solid_deformation(X, x, V, L0, idx, geometry):
       L0: ``[N, d, d]`` the correction matrices (eq. 15).
     """
     n, d = X.shape
-    return _call("sphjax_solid_deformation", (n, d, d), X.dtype, geometry, X, x, V, L0, _list(idx))
+    return _within(
+        "sphjax_solid_deformation", (n, d, d), X.dtype, geometry, X, x, V, L0, _list(idx)
+    )
 
 
 def solid_momentum(X, x, V, PL0, F, idx, geometry, parameters, *, penalty: bool):
@@ -294,7 +348,7 @@ def solid_momentum(X, x, V, PL0, F, idx, geometry, parameters, *, penalty: bool)
       parameters: ``(solid_density, young_modulus, penalty_alpha)``.
     """
     scalars = [jax.numpy.asarray(q, X.dtype) for q in parameters]
-    return _call(
+    return _within(
         "sphjax_solid_momentum",
         X.shape,
         X.dtype,

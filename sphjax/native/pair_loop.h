@@ -6,6 +6,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
+#include <type_traits>
 #include <vector>
 
 #include "threads.h"
@@ -91,6 +92,30 @@ struct Pair {
   T grad[D];  // grad_a W_ab
 };
 
+// The geometry of the pair of a (at xa) and b (at xb[i * stride]): the minimum image,
+// and W = grad W = 0 outside the support (grad W = 0 at r = 0), without a branch.
+template <typename T, int D, int Kernel>
+inline Pair<T, D> pair_of(const Setting<T>& s, const T* xa, const T* xb, int64_t stride) {
+  Pair<T, D> p;
+  T r2 = T(0);
+  for (int i = 0; i < D; i++) {
+    T d = xa[i] - xb[i * stride];
+    d -= s.size[i] * std::nearbyint(d * s.inverse[i]);  // the minimum image
+    p.dr[i] = d;
+    r2 += d * d;
+  }
+  const T inside = r2 < s.cutoff2 ? T(1) : T(0);
+  const T r = std::sqrt(r2);
+  const T q = r * s.inverse_h;
+  const T safe = r > T(0) ? r : T(1);
+  p.r2 = r2;
+  p.w = inside * s.w_scale * Shape<T, Kernel>::value(q);
+  const T factor =
+      r > T(0) ? inside * s.grad_scale * Shape<T, Kernel>::derivative(q) / safe : T(0);
+  for (int i = 0; i < D; i++) p.grad[i] = factor * p.dr[i];
+  return p;
+}
+
 // The loop.  For each row a of the list, its neighbours b > a are gathered into
 // contiguous buffers (positions, and the Term's F numbers per neighbour: Term::load),
 // then one vectorised loop over them computes each pair's geometry and the Term's W
@@ -136,23 +161,7 @@ void each_pair_once(ffi::ThreadPool* pool, const Setting<T>& s, const T* x, cons
       const auto own = term.row(a);
 #pragma omp simd
       for (int64_t j = 0; j < count; j++) {
-        Pair<T, D> p;
-        T r2 = T(0);
-        for (int i = 0; i < D; i++) {
-          T d = xa[i] - xb[i * k + j];
-          d -= s.size[i] * std::nearbyint(d * s.inverse[i]);  // the minimum image
-          p.dr[i] = d;
-          r2 += d * d;
-        }
-        const T inside = r2 < s.cutoff2 ? T(1) : T(0);
-        const T r = std::sqrt(r2);
-        const T q = r * s.inverse_h;
-        const T safe = r > T(0) ? r : T(1);
-        p.r2 = r2;
-        p.w = inside * s.w_scale * Shape<T, Kernel>::value(q);
-        const T factor = r > T(0) ? inside * s.grad_scale * Shape<T, Kernel>::derivative(q) / safe
-                                  : T(0);
-        for (int i = 0; i < D; i++) p.grad[i] = factor * p.dr[i];
+        const Pair<T, D> p = pair_of<T, D, Kernel>(s, xa, xb + j, k);
         // written straight into the buffers: a Term's W numbers held in a local array
         // per pair would become strided stores, which keep GCC from vectorising the loop
         term.pair(own, p, fb + j, k, oa + j, ob + j);
@@ -171,15 +180,83 @@ void each_pair_once(ffi::ThreadPool* pool, const Setting<T>& s, const T* x, cons
     for (int64_t i = 0; i < n * W; i++) out[i] += copy[i];
 }
 
+// Rows of one system against the columns of another: out_a = sum_{b in idx[a]} f(a, b)
+// (the Term's weight included) over a list whose entries index the columns (padded with
+// n_cols or more), each pair from a's side only, so threads write their own rows and
+// need no copies.  `rows` reads a (Term::row), `columns` reads b (Term::load) and
+// evaluates the pair (Term::pair; its numbers for b are dropped).
+template <typename T, int D, int Kernel, typename Term>
+void rows_against_columns(ffi::ThreadPool* pool, const Setting<T>& s, const T* x_rows,
+                          const T* x_columns, const int32_t* idx, int64_t n_rows,
+                          int64_t n_columns, int64_t k, T* out, const Term& rows,
+                          const Term& columns) {
+  constexpr int W = Term::width, F = Term::fields;
+  const int64_t threads = thread_count(pool, n_rows);
+  auto block = [&](int64_t t) {
+    const int64_t lo = n_rows * t / threads, hi = n_rows * (t + 1) / threads;
+    std::vector<int32_t> present(k);
+    std::vector<T> buffer((D + F + 2 * W) * k + 1);
+    T* xb = buffer.data();
+    T* fb = xb + D * k;
+    T* oa = fb + F * k;
+    T* ob = oa + W * k;  // the pairs' numbers for b: not wanted
+    for (int64_t a = lo; a < hi; a++) {
+      const int32_t* row = idx + a * k;
+      int64_t count = 0;
+      for (int64_t j = 0; j < k; j++) {
+        present[count] = row[j];
+        count += (row[j] >= 0) & (row[j] < n_columns);
+      }
+      for (int64_t j = 0; j < count; j++) {
+        const int64_t b = present[j];
+        for (int i = 0; i < D; i++) xb[i * k + j] = x_columns[b * D + i];
+        columns.load(b, fb + j, k);
+      }
+      T xa[D];
+      for (int i = 0; i < D; i++) xa[i] = x_rows[a * D + i];
+      const auto own = rows.row(a);
+#pragma omp simd
+      for (int64_t j = 0; j < count; j++) {
+        const Pair<T, D> p = pair_of<T, D, Kernel>(s, xa, xb + j, k);
+        columns.pair(own, p, fb + j, k, oa + j, ob + j);
+      }
+      for (int w = 0; w < W; w++) {
+        T sum = T(0);
+        for (int64_t j = 0; j < count; j++) sum += oa[w * k + j];
+        out[a * W + w] = sum;
+      }
+    }
+  };
+  in_parallel(pool, threads, block);
+}
+
+// A sum over pairs with the kernel as a template argument: within one system
+// (`columns` == nullptr: each_pair_once over a symmetric list) or rows against columns.
+template <typename T, int D, typename Term>
+void sum_pairs(ffi::ThreadPool* pool, int kernel, const Setting<T>& s, const T* x_rows,
+               const T* x_columns, const int32_t* idx, int64_t n_rows, int64_t n_columns,
+               int64_t k, T* out, const Term& rows, const Term* columns) {
+  auto with = [&](auto shape) {
+    constexpr int K = decltype(shape)::value;
+    if (columns == nullptr)
+      each_pair_once<T, D, K>(pool, s, x_rows, idx, n_rows, k, out, rows);
+    else
+      rows_against_columns<T, D, K>(pool, s, x_rows, x_columns, idx, n_rows, n_columns, k,
+                                    out, rows, *columns);
+  };
+  switch (kernel) {
+    case 0: return with(std::integral_constant<int, 0>{});
+    case 1: return with(std::integral_constant<int, 1>{});
+    case 2: return with(std::integral_constant<int, 2>{});
+    default: return with(std::integral_constant<int, 3>{});
+  }
+}
+
+// each_pair_once with the kernel as a template argument
 template <typename T, int D, typename Term>
 void by_kernel(ffi::ThreadPool* pool, int kernel, const Setting<T>& s, const T* x,
                const int32_t* idx, int64_t n, int64_t k, T* out, const Term& term) {
-  switch (kernel) {
-    case 0: return each_pair_once<T, D, 0>(pool, s, x, idx, n, k, out, term);
-    case 1: return each_pair_once<T, D, 1>(pool, s, x, idx, n, k, out, term);
-    case 2: return each_pair_once<T, D, 2>(pool, s, x, idx, n, k, out, term);
-    default: return each_pair_once<T, D, 3>(pool, s, x, idx, n, k, out, term);
-  }
+  sum_pairs<T, D>(pool, kernel, s, x, x, idx, n, n, k, out, term, static_cast<const Term*>(nullptr));
 }
 
 template <typename T>

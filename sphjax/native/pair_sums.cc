@@ -168,52 +168,117 @@ struct MomentumTerm {
   }
 };
 
-template <typename T, int D>
-void kernel_sum(ffi::ThreadPool* pool, const Setting<T>& s, int kernel, const T* x, const T* m, const int32_t* idx,
-                int64_t n, int64_t k, T* out) {
-  by_kernel<T, D>(pool, kernel, s, x, idx, n, k, out, KernelSumTerm<T, D>{m});
+// The particles on one side of a sum: the rows, or the columns of another system (the
+// fields a sum does not read are null).
+template <typename T>
+struct Side {
+  const T *x, *m, *v, *rho, *p;
+  int64_t n;
+};
+
+// where a sum runs: XLA's threads, the kernel, the list's width, within one system
+// (each pair once) or rows against the columns of another
+struct Where {
+  ffi::ThreadPool* pool;
+  int kernel;
+  int64_t k;
+  bool cross;
+};
+
+template <typename T, int D, typename Term>
+void over_pairs(const Where& at, const Setting<T>& s, const Side<T>& a, const Side<T>& b,
+                const int32_t* idx, T* out, const Term& rows, const Term& columns) {
+  sum_pairs<T, D>(at.pool, at.kernel, s, a.x, b.x, idx, a.n, b.n, at.k, out, rows,
+                  at.cross ? &columns : nullptr);
 }
 
 template <typename T, int D>
-void velocity_divergence(ffi::ThreadPool* pool, const Setting<T>& s, int kernel, const T* x, const T* v, const T* m,
-                         const int32_t* idx, int64_t n, int64_t k, T* out) {
-  by_kernel<T, D>(pool, kernel, s, x, idx, n, k, out, DivergenceTerm<T, D>{m, v});
+void kernel_sum(const Where& at, const Setting<T>& s, const Side<T>& a, const Side<T>& b,
+                const int32_t* idx, T* out) {
+  over_pairs<T, D>(at, s, a, b, idx, out, KernelSumTerm<T, D>{a.m}, KernelSumTerm<T, D>{b.m});
 }
 
 template <typename T, int D>
-void continuity_molteni(ffi::ThreadPool* pool, const Setting<T>& s, int kernel, const DiffusionParameters& dp,
-                        const T* x, const T* v, const T* m, const T* rho, const int32_t* idx,
-                        int64_t n, int64_t k, T* out) {
-  MolteniTerm<T, D> term{m, v, rho, {}, T(0), T(kEta2) * s.h * s.h};
+void velocity_divergence(const Where& at, const Setting<T>& s, const Side<T>& a,
+                         const Side<T>& b, const int32_t* idx, T* out) {
+  over_pairs<T, D>(at, s, a, b, idx, out, DivergenceTerm<T, D>{a.m, a.v},
+                   DivergenceTerm<T, D>{b.m, b.v});
+}
+
+template <typename T, int D>
+void continuity_molteni(const Where& at, const Setting<T>& s, const DiffusionParameters& dp,
+                        const Side<T>& a, const int32_t* idx, T* out) {
+  MolteniTerm<T, D> term{a.m, a.v, a.rho, {}, T(0), T(kEta2) * s.h * s.h};
   const T c0 = T(dp.sound_speed);
   term.diffusion = T(dp.delta) * s.h * c0;
   for (int i = 0; i < D; i++) term.hydrostatic[i] = T(dp.reference_density * dp.gravity[i]) / (c0 * c0);
-  by_kernel<T, D>(pool, kernel, s, x, idx, n, k, out, term);
+  over_pairs<T, D>(at, s, a, a, idx, out, term, term);
 }
 
-template <typename T, int D>
-void momentum(ffi::ThreadPool* pool, const Setting<T>& s, int kernel, const MomentumParameters& mp, const T* x,
-              const T* v, const T* m, const T* rho, const T* pressure, const int32_t* idx,
-              int64_t n, int64_t k, T* out) {
-  std::vector<T> coefficient(n), inverse(n);  // P = p / rho^2, 1 / rho
-  for (int64_t a = 0; a < n; a++) {
-    inverse[a] = T(1) / rho[a];
-    coefficient[a] = pressure[a] * (inverse[a] * inverse[a]);
+// the per-particle numbers the momentum term reads instead of dividing per pair
+template <typename T>
+struct Coefficients {
+  std::vector<T> P, inverse;  // p / rho^2, 1 / rho
+  explicit Coefficients(const Side<T>& side) : P(side.n), inverse(side.n) {
+    for (int64_t a = 0; a < side.n; a++) {
+      inverse[a] = T(1) / side.rho[a];
+      P[a] = side.p[a] * (inverse[a] * inverse[a]);
+    }
   }
-  MomentumTerm<T, D> term{m,
-                      v,
-                      rho,
-                      coefficient.data(),
-                      inverse.data(),
-                      s.h,
-                      T(mp.sound_speed),
-                      T(mp.alpha),
-                      T(mp.beta),
-                      T(mp.nu),
-                      mp.artificial ? T(1) : T(0),
-                      mp.morris ? T(1) : T(0),
-                      T(kEta2) * s.h * s.h};
-  by_kernel<T, D>(pool, kernel, s, x, idx, n, k, out, term);
+};
+
+template <typename T, int D>
+void momentum(const Where& at, const Setting<T>& s, const MomentumParameters& mp,
+              const Side<T>& a, const Side<T>& b, const int32_t* idx, T* out) {
+  auto term = [&](const Side<T>& side, const Coefficients<T>& c) {
+    return MomentumTerm<T, D>{side.m,
+                              side.v,
+                              side.rho,
+                              c.P.data(),
+                              c.inverse.data(),
+                              s.h,
+                              T(mp.sound_speed),
+                              T(mp.alpha),
+                              T(mp.beta),
+                              T(mp.nu),
+                              mp.artificial ? T(1) : T(0),
+                              mp.morris ? T(1) : T(0),
+                              T(kEta2) * s.h * s.h};
+  };
+  const Coefficients<T> of_a(a);
+  if (!at.cross) return over_pairs<T, D>(at, s, a, a, idx, out, term(a, of_a), term(a, of_a));
+  const Coefficients<T> of_b(b);
+  over_pairs<T, D>(at, s, a, b, idx, out, term(a, of_a), term(b, of_b));
+}
+
+// Adami et al.'s extrapolation onto a boundary particle a from its fluid neighbours b, per
+// pair: W_ab, p_b W_ab, rho_b W_ab r_ab and W_ab v_b (rows against columns only)
+template <typename T, int D>
+struct ExtrapolationTerm {
+  static constexpr int width = 2 + 2 * D, fields = 2 + D;
+  const T *p, *rho, *v;
+  void load(int64_t b, T* into, int64_t stride) const {
+    into[0] = p[b];
+    into[stride] = rho[b];
+    for (int i = 0; i < D; i++) into[(2 + i) * stride] = v[b * D + i];
+  }
+  int row(int64_t) const { return 0; }
+  void pair(int, const Pair<T, D>& q, const T* from, int64_t stride, T* on_a, T* on_b) const {
+    on_a[0] = q.w;
+    on_a[stride] = from[0] * q.w;
+    for (int i = 0; i < D; i++) {
+      on_a[(2 + i) * stride] = from[stride] * q.w * q.dr[i];
+      on_a[(2 + D + i) * stride] = q.w * from[(2 + i) * stride];
+    }
+    on_b[0] = T(0);
+  }
+};
+
+template <typename T, int D>
+void extrapolation(const Where& at, const Setting<T>& s, const Side<T>& a, const Side<T>& b,
+                   const int32_t* idx, T* out) {
+  const ExtrapolationTerm<T, D> columns{b.p, b.rho, b.v};
+  over_pairs<T, D>(at, s, a, b, idx, out, columns, columns);
 }
 
 // ------------------------------------------------------------------ FFI handlers
@@ -229,16 +294,20 @@ T* data(ffi::Result<ffi::AnyBuffer>& buffer) {
 }
 
 template <typename T>
-T scalar(const ffi::AnyBuffer& buffer) {
-  return *data<T>(buffer);
+const T* optional(const ffi::AnyBuffer* buffer) {
+  return buffer == nullptr ? nullptr : data<T>(*buffer);
 }
 
-ffi::Error check(const ffi::AnyBuffer& x, const ffi::Buffer<ffi::S32>& idx) {
+ffi::Error check(const ffi::AnyBuffer& x, const ffi::AnyBuffer& x_columns,
+                 const ffi::Buffer<ffi::S32>& idx) {
   auto xd = x.dimensions();
   if (xd.size() != 2 || (xd[1] != 2 && xd[1] != 3))
     return ffi::Error::InvalidArgument("positions must be [N, 2] or [N, 3]");
   if (x.element_type() != ffi::F32 && x.element_type() != ffi::F64)
     return ffi::Error::InvalidArgument("positions must be float32 or float64");
+  auto cd = x_columns.dimensions();
+  if (cd.size() != 2 || cd[1] != xd[1] || x_columns.element_type() != x.element_type())
+    return ffi::Error::InvalidArgument("the columns' positions must be [M, d] as the rows'");
   if (idx.dimensions().size() != 2 || idx.dimensions()[0] != xd[0])
     return ffi::Error::InvalidArgument("the neighbour list must be [N, K]");
   return ffi::Error::Success();
@@ -246,7 +315,7 @@ ffi::Error check(const ffi::AnyBuffer& x, const ffi::Buffer<ffi::S32>& idx) {
 
 #define SPHJAX_SETTING_ATTRS                                                        \
   int64_t kernel, double h, double cutoff, double sigma, double lx, double ly, double lz, \
-      int64_t periodic
+      int64_t periodic, bool cross
 
 #define SPHJAX_BIND_SETTING(binding)                                                    \
   binding.Attr<int64_t>("kernel")                                                       \
@@ -256,171 +325,179 @@ ffi::Error check(const ffi::AnyBuffer& x, const ffi::Buffer<ffi::S32>& idx) {
       .Attr<double>("lx")                                                               \
       .Attr<double>("ly")                                                               \
       .Attr<double>("lz")                                                               \
-      .Attr<int64_t>("periodic")
+      .Attr<int64_t>("periodic")                                                        \
+      .Attr<bool>("cross")
 
-// Dispatch on the element type and the dimension: body<T, D>() for the call's.
-template <template <typename, int> class Body, typename... Args>
-ffi::Error dispatch(const ffi::AnyBuffer& x, Args&&... args) {
-  const bool single = x.element_type() == ffi::F32;
-  const int64_t dim = x.dimensions()[1];
-  if (single && dim == 2) Body<float, 2>::run(args...);
-  if (single && dim == 3) Body<float, 3>::run(args...);
-  if (!single && dim == 2) Body<double, 2>::run(args...);
-  if (!single && dim == 3) Body<double, 3>::run(args...);
-  return ffi::Error::Success();
-}
+#define SPHJAX_SETTING_NAMES kernel, h, cutoff, sigma, lx, ly, lz, periodic, cross
 
+// One call: where it runs, the pair geometry, and the fields of its two sides as buffers
+// (a field a sum does not read: nullptr).
 struct Call {
   ffi::ThreadPool* pool;
-  int64_t kernel, n, k;
+  int64_t kernel, k;
   double h, cutoff, sigma, lx, ly, lz;
   int64_t periodic;
+  bool cross;
   int dim;
+  Call(ffi::ThreadPool& pool, const ffi::AnyBuffer& x, const ffi::Buffer<ffi::S32>& idx,
+       SPHJAX_SETTING_ATTRS)
+      : pool(&pool), kernel(kernel), k(idx.dimensions()[1]), h(h), cutoff(cutoff),
+        sigma(sigma), lx(lx), ly(ly), lz(lz), periodic(periodic), cross(cross),
+        dim(static_cast<int>(x.dimensions()[1])) {}
   template <typename T>
   Setting<T> geometry() const {
     return setting<T>(dim, h, cutoff, sigma, lx, ly, lz, periodic);
   }
+  Where where() const { return Where{pool, static_cast<int>(kernel), k, cross}; }
 };
+
+struct Buffers {  // x, m, v, rho, p of one side
+  const ffi::AnyBuffer *x, *m, *v, *rho, *p;
+  template <typename T>
+  Side<T> side() const {
+    return Side<T>{optional<T>(x), optional<T>(m), optional<T>(v), optional<T>(rho),
+                   optional<T>(p), x->dimensions()[0]};
+  }
+};
+
+// Run Sum<T, D>::run(...) for the call's element type and dimension.
+template <template <typename, int> class Sum, typename... Args>
+ffi::Error dispatch(const ffi::AnyBuffer& x, Args&&... args) {
+  const bool single = x.element_type() == ffi::F32;
+  const int64_t dim = x.dimensions()[1];
+  if (single && dim == 2) Sum<float, 2>::run(args...);
+  if (single && dim == 3) Sum<float, 3>::run(args...);
+  if (!single && dim == 2) Sum<double, 2>::run(args...);
+  if (!single && dim == 3) Sum<double, 3>::run(args...);
+  return ffi::Error::Success();
+}
 
 template <typename T, int D>
 struct KernelSumBody {
-  static void run(const Call& c, const ffi::AnyBuffer& x, const ffi::AnyBuffer& m,
-                  const int32_t* idx, ffi::Result<ffi::AnyBuffer>& out) {
-    kernel_sum<T, D>(c.pool, c.geometry<T>(), c.kernel, data<T>(x), data<T>(m), idx, c.n, c.k,
-                     data<T>(out));
+  static void run(const Call& c, const Buffers& a, const Buffers& b, const int32_t* idx,
+                  ffi::Result<ffi::AnyBuffer>& out) {
+    kernel_sum<T, D>(c.where(), c.geometry<T>(), a.side<T>(), b.side<T>(), idx, data<T>(out));
   }
 };
 
 template <typename T, int D>
 struct DivergenceBody {
-  static void run(const Call& c, const ffi::AnyBuffer& x, const ffi::AnyBuffer& v,
-                  const ffi::AnyBuffer& m, const int32_t* idx, ffi::Result<ffi::AnyBuffer>& out) {
-    velocity_divergence<T, D>(c.pool, c.geometry<T>(), c.kernel, data<T>(x), data<T>(v), data<T>(m), idx,
-                              c.n, c.k, data<T>(out));
+  static void run(const Call& c, const Buffers& a, const Buffers& b, const int32_t* idx,
+                  ffi::Result<ffi::AnyBuffer>& out) {
+    velocity_divergence<T, D>(c.where(), c.geometry<T>(), a.side<T>(), b.side<T>(), idx,
+                              data<T>(out));
   }
 };
 
 template <typename T, int D>
 struct MolteniBody {
-  static void run(const Call& c, const DiffusionParameters& dp, const ffi::AnyBuffer& x,
-                  const ffi::AnyBuffer& v, const ffi::AnyBuffer& m, const ffi::AnyBuffer& rho,
+  static void run(const Call& c, const DiffusionParameters& dp, const Buffers& a,
                   const int32_t* idx, ffi::Result<ffi::AnyBuffer>& out) {
-    continuity_molteni<T, D>(c.pool, c.geometry<T>(), c.kernel, dp, data<T>(x), data<T>(v), data<T>(m),
-                             data<T>(rho), idx, c.n, c.k, data<T>(out));
+    continuity_molteni<T, D>(c.where(), c.geometry<T>(), dp, a.side<T>(), idx, data<T>(out));
   }
 };
 
 template <typename T, int D>
 struct MomentumBody {
-  static void run(const Call& c, const MomentumParameters& mp, const ffi::AnyBuffer& x,
-                  const ffi::AnyBuffer& v, const ffi::AnyBuffer& m, const ffi::AnyBuffer& rho,
-                  const ffi::AnyBuffer& p, const int32_t* idx, ffi::Result<ffi::AnyBuffer>& out) {
-    momentum<T, D>(c.pool, c.geometry<T>(), c.kernel, mp, data<T>(x), data<T>(v), data<T>(m),
-                   data<T>(rho), data<T>(p), idx, c.n, c.k, data<T>(out));
+  static void run(const Call& c, const MomentumParameters& mp, const Buffers& a,
+                  const Buffers& b, const int32_t* idx, ffi::Result<ffi::AnyBuffer>& out) {
+    momentum<T, D>(c.where(), c.geometry<T>(), mp, a.side<T>(), b.side<T>(), idx, data<T>(out));
   }
 };
 
-Call call_of(ffi::ThreadPool& pool, const ffi::AnyBuffer& x, const ffi::Buffer<ffi::S32>& idx,
-             SPHJAX_SETTING_ATTRS) {
-  return Call{&pool, kernel,   x.dimensions()[0], idx.dimensions()[1],
-              h,     cutoff,   sigma,             lx,
-              ly,    lz,       periodic,          static_cast<int>(x.dimensions()[1])};
+template <typename T, int D>
+struct ExtrapolationBody {
+  static void run(const Call& c, const Buffers& a, const Buffers& b, const int32_t* idx,
+                  ffi::Result<ffi::AnyBuffer>& out) {
+    extrapolation<T, D>(c.where(), c.geometry<T>(), a.side<T>(), b.side<T>(), idx,
+                        data<T>(out));
+  }
+};
+
+// a parameter passed as a 0-d or 1-d array of the run's dtype, as a double
+double value(const ffi::AnyBuffer& x, const ffi::AnyBuffer& b, int i = 0) {
+  return x.element_type() == ffi::F32 ? double(data<float>(b)[i]) : data<double>(b)[i];
 }
 
-ffi::Error KernelSum(ffi::ThreadPool pool, ffi::AnyBuffer x, ffi::AnyBuffer m, ffi::Buffer<ffi::S32> idx,
+ffi::Error KernelSum(ffi::ThreadPool pool, ffi::AnyBuffer x, ffi::AnyBuffer m,
+                     ffi::AnyBuffer x_b, ffi::AnyBuffer m_b, ffi::Buffer<ffi::S32> idx,
                      ffi::Result<ffi::AnyBuffer> out, SPHJAX_SETTING_ATTRS) {
-  if (auto e = check(x, idx); e.failure()) return e;
-  Call c = call_of(pool, x, idx, kernel, h, cutoff, sigma, lx, ly, lz, periodic);
-  return dispatch<KernelSumBody>(x, c, x, m, idx.typed_data(), out);
+  if (auto e = check(x, x_b, idx); e.failure()) return e;
+  const Call c(pool, x, idx, SPHJAX_SETTING_NAMES);
+  const Buffers a{&x, &m, nullptr, nullptr, nullptr}, b{&x_b, &m_b, nullptr, nullptr, nullptr};
+  return dispatch<KernelSumBody>(x, c, a, b, idx.typed_data(), out);
 }
 
-ffi::Error VelocityDivergence(ffi::ThreadPool pool, ffi::AnyBuffer x, ffi::AnyBuffer v, ffi::AnyBuffer m,
-                              ffi::Buffer<ffi::S32> idx, ffi::Result<ffi::AnyBuffer> out,
-                              SPHJAX_SETTING_ATTRS) {
-  if (auto e = check(x, idx); e.failure()) return e;
-  Call c = call_of(pool, x, idx, kernel, h, cutoff, sigma, lx, ly, lz, periodic);
-  return dispatch<DivergenceBody>(x, c, x, v, m, idx.typed_data(), out);
+ffi::Error VelocityDivergence(ffi::ThreadPool pool, ffi::AnyBuffer x, ffi::AnyBuffer v,
+                              ffi::AnyBuffer m, ffi::AnyBuffer x_b, ffi::AnyBuffer v_b,
+                              ffi::AnyBuffer m_b, ffi::Buffer<ffi::S32> idx,
+                              ffi::Result<ffi::AnyBuffer> out, SPHJAX_SETTING_ATTRS) {
+  if (auto e = check(x, x_b, idx); e.failure()) return e;
+  const Call c(pool, x, idx, SPHJAX_SETTING_NAMES);
+  const Buffers a{&x, &m, &v, nullptr, nullptr}, b{&x_b, &m_b, &v_b, nullptr, nullptr};
+  return dispatch<DivergenceBody>(x, c, a, b, idx.typed_data(), out);
 }
 
-ffi::Error ContinuityMolteni(ffi::ThreadPool pool, ffi::AnyBuffer x, ffi::AnyBuffer v, ffi::AnyBuffer m,
-                             ffi::AnyBuffer rho, ffi::Buffer<ffi::S32> idx, ffi::AnyBuffer gravity,
-                             ffi::AnyBuffer reference_density, ffi::AnyBuffer sound_speed,
-                             ffi::AnyBuffer delta, ffi::Result<ffi::AnyBuffer> out,
-                             SPHJAX_SETTING_ATTRS) {
-  if (auto e = check(x, idx); e.failure()) return e;
-  Call c = call_of(pool, x, idx, kernel, h, cutoff, sigma, lx, ly, lz, periodic);
-  const bool single = x.element_type() == ffi::F32;
-  auto value = [single](const ffi::AnyBuffer& b, int i) {
-    return single ? double(data<float>(b)[i]) : data<double>(b)[i];
-  };
-  DiffusionParameters dp{{0.0, 0.0, 0.0}, value(reference_density, 0), value(sound_speed, 0),
-                         value(delta, 0)};
-  for (int i = 0; i < c.dim; i++) dp.gravity[i] = value(gravity, i);
-  return dispatch<MolteniBody>(x, c, dp, x, v, m, rho, idx.typed_data(), out);
+ffi::Error ContinuityMolteni(ffi::ThreadPool pool, ffi::AnyBuffer x, ffi::AnyBuffer v,
+                             ffi::AnyBuffer m, ffi::AnyBuffer rho, ffi::Buffer<ffi::S32> idx,
+                             ffi::AnyBuffer gravity, ffi::AnyBuffer reference_density,
+                             ffi::AnyBuffer sound_speed, ffi::AnyBuffer delta,
+                             ffi::Result<ffi::AnyBuffer> out, SPHJAX_SETTING_ATTRS) {
+  if (auto e = check(x, x, idx); e.failure()) return e;
+  if (cross) return ffi::Error::InvalidArgument("the diffusion sum is within one fluid");
+  const Call c(pool, x, idx, SPHJAX_SETTING_NAMES);
+  DiffusionParameters dp{{0.0, 0.0, 0.0}, value(x, reference_density), value(x, sound_speed),
+                         value(x, delta)};
+  for (int i = 0; i < c.dim; i++) dp.gravity[i] = value(x, gravity, i);
+  const Buffers a{&x, &m, &v, &rho, nullptr};
+  return dispatch<MolteniBody>(x, c, dp, a, idx.typed_data(), out);
 }
 
-ffi::Error Momentum(ffi::ThreadPool pool, ffi::AnyBuffer x, ffi::AnyBuffer v, ffi::AnyBuffer m, ffi::AnyBuffer rho,
-                    ffi::AnyBuffer p, ffi::Buffer<ffi::S32> idx, ffi::AnyBuffer sound_speed,
+ffi::Error Momentum(ffi::ThreadPool pool, ffi::AnyBuffer x, ffi::AnyBuffer v, ffi::AnyBuffer m,
+                    ffi::AnyBuffer rho, ffi::AnyBuffer p, ffi::AnyBuffer x_b,
+                    ffi::AnyBuffer v_b, ffi::AnyBuffer m_b, ffi::AnyBuffer rho_b,
+                    ffi::AnyBuffer p_b, ffi::Buffer<ffi::S32> idx, ffi::AnyBuffer sound_speed,
                     ffi::AnyBuffer alpha, ffi::AnyBuffer beta, ffi::AnyBuffer nu,
                     ffi::Result<ffi::AnyBuffer> out, SPHJAX_SETTING_ATTRS, bool artificial,
                     bool morris) {
-  if (auto e = check(x, idx); e.failure()) return e;
-  Call c = call_of(pool, x, idx, kernel, h, cutoff, sigma, lx, ly, lz, periodic);
-  const bool single = x.element_type() == ffi::F32;
-  auto value = [single](const ffi::AnyBuffer& b) {
-    return single ? double(scalar<float>(b)) : scalar<double>(b);
-  };
-  MomentumParameters mp{value(sound_speed), value(alpha), value(beta), value(nu), artificial,
-                        morris};
-  return dispatch<MomentumBody>(x, c, mp, x, v, m, rho, p, idx.typed_data(), out);
+  if (auto e = check(x, x_b, idx); e.failure()) return e;
+  const Call c(pool, x, idx, SPHJAX_SETTING_NAMES);
+  MomentumParameters mp{value(x, sound_speed), value(x, alpha), value(x, beta), value(x, nu),
+                        artificial, morris};
+  const Buffers a{&x, &m, &v, &rho, &p}, b{&x_b, &m_b, &v_b, &rho_b, &p_b};
+  return dispatch<MomentumBody>(x, c, mp, a, b, idx.typed_data(), out);
+}
+
+ffi::Error Extrapolation(ffi::ThreadPool pool, ffi::AnyBuffer x, ffi::AnyBuffer x_b,
+                         ffi::AnyBuffer p_b, ffi::AnyBuffer rho_b, ffi::AnyBuffer v_b,
+                         ffi::Buffer<ffi::S32> idx, ffi::Result<ffi::AnyBuffer> out,
+                         SPHJAX_SETTING_ATTRS) {
+  if (auto e = check(x, x_b, idx); e.failure()) return e;
+  if (!cross) return ffi::Error::InvalidArgument("the extrapolation is onto another system");
+  const Call c(pool, x, idx, SPHJAX_SETTING_NAMES);
+  const Buffers a{&x, nullptr, nullptr, nullptr, nullptr}, b{&x_b, nullptr, &v_b, &rho_b, &p_b};
+  return dispatch<ExtrapolationBody>(x, c, a, b, idx.typed_data(), out);
 }
 
 }  // namespace
 
-XLA_FFI_DEFINE_HANDLER_SYMBOL(SphjaxKernelSum, KernelSum,
-                              SPHJAX_BIND_SETTING(ffi::Ffi::Bind()
-                                                      .Ctx<ffi::ThreadPool>()
-                                                      .Arg<ffi::AnyBuffer>()
-                                                      .Arg<ffi::AnyBuffer>()
-                                                      .Arg<ffi::Buffer<ffi::S32>>()
-                                                      .Ret<ffi::AnyBuffer>()));
+// the arguments of a handler: XLA's thread pool, n buffers, the neighbour list, m more
+#define SPHJAX_ARGS_1 .Arg<ffi::AnyBuffer>()
+#define SPHJAX_ARGS_2 SPHJAX_ARGS_1 SPHJAX_ARGS_1
+#define SPHJAX_ARGS_3 SPHJAX_ARGS_2 SPHJAX_ARGS_1
+#define SPHJAX_ARGS_4 SPHJAX_ARGS_2 SPHJAX_ARGS_2
+#define SPHJAX_ARGS_5 SPHJAX_ARGS_4 SPHJAX_ARGS_1
+#define SPHJAX_ARGS_6 SPHJAX_ARGS_3 SPHJAX_ARGS_3
+#define SPHJAX_ARGS_10 SPHJAX_ARGS_5 SPHJAX_ARGS_5
+#define SPHJAX_ARGS_0
+#define SPHJAX_BIND(before, after)                                                       \
+  SPHJAX_BIND_SETTING(ffi::Ffi::Bind().Ctx<ffi::ThreadPool>() SPHJAX_ARGS_##before       \
+                          .Arg<ffi::Buffer<ffi::S32>>() SPHJAX_ARGS_##after              \
+                          .Ret<ffi::AnyBuffer>())
 
-XLA_FFI_DEFINE_HANDLER_SYMBOL(SphjaxVelocityDivergence, VelocityDivergence,
-                              SPHJAX_BIND_SETTING(ffi::Ffi::Bind()
-                                                      .Ctx<ffi::ThreadPool>()
-                                                      .Arg<ffi::AnyBuffer>()
-                                                      .Arg<ffi::AnyBuffer>()
-                                                      .Arg<ffi::AnyBuffer>()
-                                                      .Arg<ffi::Buffer<ffi::S32>>()
-                                                      .Ret<ffi::AnyBuffer>()));
-
+XLA_FFI_DEFINE_HANDLER_SYMBOL(SphjaxKernelSum, KernelSum, SPHJAX_BIND(4, 0));
+XLA_FFI_DEFINE_HANDLER_SYMBOL(SphjaxVelocityDivergence, VelocityDivergence, SPHJAX_BIND(6, 0));
+XLA_FFI_DEFINE_HANDLER_SYMBOL(SphjaxContinuityMolteni, ContinuityMolteni, SPHJAX_BIND(4, 4));
 XLA_FFI_DEFINE_HANDLER_SYMBOL(SphjaxMomentum, Momentum,
-                              SPHJAX_BIND_SETTING(ffi::Ffi::Bind()
-                                                      .Ctx<ffi::ThreadPool>()
-                                                      .Arg<ffi::AnyBuffer>()
-                                                      .Arg<ffi::AnyBuffer>()
-                                                      .Arg<ffi::AnyBuffer>()
-                                                      .Arg<ffi::AnyBuffer>()
-                                                      .Arg<ffi::AnyBuffer>()
-                                                      .Arg<ffi::Buffer<ffi::S32>>()
-                                                      .Arg<ffi::AnyBuffer>()
-                                                      .Arg<ffi::AnyBuffer>()
-                                                      .Arg<ffi::AnyBuffer>()
-                                                      .Arg<ffi::AnyBuffer>()
-                                                      .Ret<ffi::AnyBuffer>())
-                                  .Attr<bool>("artificial")
-                                  .Attr<bool>("morris"));
-
-XLA_FFI_DEFINE_HANDLER_SYMBOL(SphjaxContinuityMolteni, ContinuityMolteni,
-                              SPHJAX_BIND_SETTING(ffi::Ffi::Bind()
-                                                      .Ctx<ffi::ThreadPool>()
-                                                      .Arg<ffi::AnyBuffer>()
-                                                      .Arg<ffi::AnyBuffer>()
-                                                      .Arg<ffi::AnyBuffer>()
-                                                      .Arg<ffi::AnyBuffer>()
-                                                      .Arg<ffi::Buffer<ffi::S32>>()
-                                                      .Arg<ffi::AnyBuffer>()
-                                                      .Arg<ffi::AnyBuffer>()
-                                                      .Arg<ffi::AnyBuffer>()
-                                                      .Arg<ffi::AnyBuffer>()
-                                                      .Ret<ffi::AnyBuffer>()));
+                              SPHJAX_BIND(10, 4).Attr<bool>("artificial").Attr<bool>("morris"));
+XLA_FFI_DEFINE_HANDLER_SYMBOL(SphjaxExtrapolation, Extrapolation, SPHJAX_BIND(5, 0));

@@ -156,31 +156,31 @@ def _hydrodynamic_pullback(
 pair_sums.define_pullback(_hydrodynamic_summand, _hydrodynamic_pullback)
 
 
-def _hydrodynamic_loop(keywords, geometry, weight, parity):
-    """The compiled loop of :func:`_hydrodynamic_summand` within one fluid (eq. 10 with
-    Monaghan's and Morris' viscosity); ``None`` with the transport-velocity terms, which
-    it lacks."""
-    if weight != "m" or keywords["stress"] or keywords["shift"] or not keywords["viscous"]:
+def _hydrodynamic_loop(keywords, geometry, weight, parity, cross):
+    """The compiled loop of :func:`_hydrodynamic_summand` (eq. 10 with Monaghan's and
+    Morris' viscosity), within one fluid or against a boundary's columns (their ``vv``:
+    the velocity the viscous terms see); ``None`` with the transport-velocity terms,
+    which it lacks."""
+    if weight != "m" or keywords["stress"] or keywords["shift"]:
         return None
+    viscous = keywords["viscous"]
 
-    def loop(rows, idx, shared):
+    def loop(rows, cols, idx, shared):
         parameters = (
             shared.sound_speed,
             shared.artificial_alpha,
             shared.artificial_beta,
             shared.kinematic_viscosity,
         )
+        columns = None if cols is None else {**cols, "v": cols["vv"]}
         a = native.momentum(
-            rows["x"],
-            rows["v"],
-            rows["m"],
-            rows["rho"],
-            rows["p"],
+            rows,
             idx,
             geometry,
             parameters,
-            artificial=keywords["artificial"],
-            morris=keywords["morris"],
+            artificial=keywords["artificial"] and viscous,
+            morris=keywords["morris"] and viscous,
+            columns=columns,
         )
         return {"a": a}
 
@@ -321,17 +321,17 @@ def _solid_pullback(pair, a, b, shared, bar, *, domain, penalty):
 pair_sums.define_pullback(_solid_summand, _solid_pullback)
 
 
-def _solid_loop(keywords, geometry, weight, parity):
+def _solid_loop(keywords, geometry, weight, parity, cross):
     """The compiled loop of :func:`_solid_summand` with Ganzenmüller's penalty force
     (eq. 14), each pair once; ``None`` without the penalty force, whose elastic term alone
     XLA sums faster over the reference geometry stored once per run (measured on the
     oscillating plate, docs/performance.md)."""
-    if not keywords["penalty"] or weight != "V" or parity != -1:
+    if cross or not keywords["penalty"] or weight != "V" or parity != -1:
         return None
     if keywords["domain"] != geometry.domain:
         return None
 
-    def loop(rows, idx, shared):
+    def loop(rows, cols, idx, shared):
         parameters = (shared.solid_density, shared.young_modulus, shared.penalty_alpha)
         a = native.solid_momentum(
             rows["x"],

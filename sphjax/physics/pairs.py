@@ -790,8 +790,9 @@ def pair_sum(
       block: rows per block of the adjoint's passes (``None``: all at once); the forward
         runs over all rows at once (faster on the CPU than blocks).
       native: evaluate the sum with the compiled loop of :mod:`sphjax.native` where
-        ``f`` has one (:func:`define_native`) and the sum is within one system: each
-        pair once, on the CPU; its derivatives are this function's without ``native``.
+        ``f`` has one (:func:`define_native`): within one system each pair once, between
+        two systems from the rows' side (over the compacted rows of ``pairs.members``),
+        on the CPU; its derivatives are this function's without ``native``.
     Returns:
       pytree of ``[N_a, ...]`` sums.
     """
@@ -802,22 +803,21 @@ def pair_sum(
     if stored is not None and (not same or pairs.members is not None):
         raise ValueError("pair_sum: a stored geometry needs a sum within one system")
     loop = None
-    if native and same and stored is None and pairs.members is None:
-        loop = _native_loop(f, geometry, weight, parity)
+    if native and pairs.members is None and (same or stored is None):
+        loop = _native_loop(f, geometry, weight, parity, cross=not same)
     if loop is not None:
         xla = functools.partial(
             pair_sum,
             f,
-            cols=None,
             geometry=geometry,
             weight=weight,
             parity=parity,
             adjoint=adjoint,
             block=block,
         )
-        return _native_sum(loop, xla, rows, pairs, shared)
+        return _native_sum(loop, xla, rows, cols, pairs, shared)
     if pairs.members is not None:
-        return _member_sum(f, rows, cols, pairs, geometry, shared, weight, adjoint, block)
+        return _member_sum(f, rows, cols, pairs, geometry, shared, weight, adjoint, block, native)
     if not adjoint or _autodiff_transposes(f):
         full = _weighted(f, weight)
         return _forward(
@@ -861,36 +861,43 @@ _NATIVE_LOOPS: dict = {}
 
 def define_native(summand: Callable, loop_for: Callable) -> None:
     """Give ``summand`` a compiled loop of :mod:`sphjax.native`: ``loop_for(keywords,
-    geometry, weight, parity)`` returns ``loop(rows, idx, shared)`` (the sum over the
-    symmetric list ``idx``, as :func:`pair_sum` returns it) for the summand's keyword
-    arguments (those of a ``functools.partial``), or ``None`` where the loop lacks a
-    term they ask for."""
+    geometry, weight, parity, cross)`` returns ``loop(rows, cols, idx, shared)`` (the sum
+    as :func:`pair_sum` returns it: within one system over the symmetric list ``idx``
+    with ``cols=None``, or, with ``cross``, the rows against the columns ``cols`` of
+    another system) for the summand's keyword arguments (those of a
+    ``functools.partial``), or ``None`` where the loop lacks a term they ask for."""
     _NATIVE_LOOPS[summand] = loop_for
 
 
-def _native_loop(f, geometry, weight, parity):
+def _native_loop(f, geometry, weight, parity, cross: bool):
     from sphjax import native
 
     func, keywords = (f.func, f.keywords) if isinstance(f, functools.partial) else (f, {})
     loop_for = _NATIVE_LOOPS.get(func)
     if loop_for is None or not native.supports(geometry):
         return None
-    return loop_for(keywords, geometry, weight, parity)
+    return loop_for(keywords, geometry, weight, parity, cross)
 
 
-def _native_sum(loop, xla, rows, pairs: PairList, shared):
-    """``loop(rows, idx, shared)``, whose derivative rule is ``xla``'s (the pair sum
+def _native_sum(loop, xla, rows, cols, pairs: PairList, shared):
+    """``loop(rows, cols, idx, shared)``, whose derivative rule is ``xla``'s (the pair sum
     without ``native``): forward mode, reverse mode and the custom adjoint never see the
-    loop.  Inputs without a tangent stay constants of ``xla`` (no zero tangents are
-    made up and pushed through it)."""
+    loop.  A stored pair geometry (:attr:`PairList.geometry`) is an argument of the rule,
+    so derivatives flow through it as through the XLA sum.  Inputs without a tangent stay
+    constants of ``xla`` (no zero tangents are made up and pushed through it)."""
+    stored = pairs.geometry
+    stored_leaves = None if stored is None else _without_mask(stored)
+    # the lists (integers) and the stored geometry's mask are arguments too: a closure
+    # over them would leak their tracers out of the transformations of the rule
+    lists = (dataclasses.replace(pairs, geometry=None), None if stored is None else stored.mask)
 
     @jax.custom_jvp
-    def summed(rows, shared, idx):
-        return loop(rows, idx, shared)
+    def summed(rows, cols, shared, stored_leaves, lists):
+        return loop(rows, cols, lists[0].idx, shared)
 
     @functools.partial(summed.defjvp, symbolic_zeros=True)
     def summed_jvp(primals, tangents):
-        *differentiable, idx = primals
+        *differentiable, (pairs, mask) = primals
         leaves, treedef = jax.tree_util.tree_flatten(tuple(differentiable))
         zero = lambda t: isinstance(t, jax.custom_derivatives.SymbolicZero)  # noqa: E731
         dots = jax.tree_util.tree_leaves(tuple(tangents[:-1]), is_leaf=zero)
@@ -900,15 +907,17 @@ def _native_sum(loop, xla, rows, pairs: PairList, shared):
             full = list(leaves)
             for k, value in zip(live, values, strict=True):
                 full[k] = value
-            rows, shared = jax.tree_util.tree_unflatten(treedef, full)
-            return xla(rows, pairs=dataclasses.replace(pairs, idx=idx), shared=shared)
+            rows, cols, shared, stored_leaves = jax.tree_util.tree_unflatten(treedef, full)
+            geometry = None if mask is None else PairGeometry(*stored_leaves, mask)
+            at = dataclasses.replace(pairs, geometry=geometry)
+            return xla(rows, cols, pairs=at, shared=shared)
 
         return jax.jvp(of_live, [leaves[k] for k in live], [dots[k] for k in live])
 
-    return summed(rows, shared, pairs.idx)
+    return summed(rows, cols, shared, stored_leaves, lists)
 
 
-def _member_sum(f, rows, cols, pairs: PairList, geometry, shared, weight, adjoint, block):
+def _member_sum(f, rows, cols, pairs: PairList, geometry, shared, weight, adjoint, block, native):
     """:func:`pair_sum` over the rows ``pairs.members`` only, scattered back to all rows
     (the others have no neighbours: their sums are zero)."""
     members = pairs.members
@@ -919,7 +928,16 @@ def _member_sum(f, rows, cols, pairs: PairList, geometry, shared, weight, adjoin
         pairs.idx, pairs.transpose, members.shape[0], pairs.n_cols, None, pairs.transpose_members
     )
     out = pair_sum(
-        f, rows_m, cols, inner, geometry, shared, weight=weight, adjoint=adjoint, block=block
+        f,
+        rows_m,
+        cols,
+        inner,
+        geometry,
+        shared,
+        weight=weight,
+        adjoint=adjoint,
+        block=block,
+        native=native,
     )
     return tree_map(
         lambda o: jnp.zeros((n_rows,) + o.shape[1:], o.dtype).at[members].add(o, mode="drop"),

@@ -16,6 +16,7 @@ import dataclasses
 
 import jax.numpy as jnp
 
+from sphjax import native
 from sphjax.core.space import covered, scale
 from sphjax.physics import pairs as pair_sums
 
@@ -39,6 +40,27 @@ def extrapolation_summand(pair, a, b, shared):
 # measured: autodiff's transpose keeps the quotient's sums and costs less than half the
 # custom adjoint's (benchmarks/pair_costs.py, docs/performance_gradients.md)
 pair_sums.transpose_by_autodiff(extrapolation_summand)
+
+
+def _extrapolation_loop(keywords, geometry, weight, parity, cross):
+    """The compiled loop of :func:`extrapolation_summand` (onto another system only)."""
+    if weight is not None or not cross:
+        return None
+
+    def loop(rows, cols, idx, shared):
+        sums = native.extrapolation(rows, idx, geometry, cols)
+        dim = rows["x"].shape[-1]
+        return {
+            "weight": sums[:, 0],
+            "pressure": sums[:, 1],
+            "rho_r": sums[:, 2 : 2 + dim],
+            "velocity": sums[:, 2 + dim :],
+        }
+
+    return loop
+
+
+pair_sums.define_native(extrapolation_summand, _extrapolation_loop)
 
 
 def wall_pressure(sums, gravity, wall_acceleration):

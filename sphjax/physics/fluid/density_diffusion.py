@@ -105,21 +105,20 @@ def _continuity_with_diffusion(pair, a, b, shared, *, h):
     return rate + molteni_term(pair, a["rho"], b["rho"], volume_b, hydrostatic, delta, h, c0)
 
 
-def _molteni_loop(keywords, geometry, weight, parity):
-    """The compiled loop of :func:`_continuity_with_diffusion` (both roles of each pair)."""
-    if weight is not None:
+def _molteni_loop(keywords, geometry, weight, parity, cross):
+    """The compiled loop of :func:`_continuity_with_diffusion` (both roles of each pair;
+    within one fluid only)."""
+    if weight is not None or cross:
         return None
 
-    def loop(rows, idx, shared):
+    def loop(rows, cols, idx, shared):
         parameters = (
             shared.gravity,
             shared.reference_density,
             shared.sound_speed,
             shared.density_diffusion,
         )
-        return native.continuity_molteni(
-            rows["x"], rows["v"], rows["m"], rows["rho"], idx, geometry, parameters
-        )
+        return native.continuity_molteni(rows, idx, geometry, parameters)
 
     return loop
 
