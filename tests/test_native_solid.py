@@ -207,7 +207,8 @@ def test_a_native_fsi_run_follows_the_xla_run():
     model = dataclasses.replace(
         case.model, systems=(fluid, wall, solid.replace(penalty=sphjax.PenaltyForce()))
     )
-    case = case.replace(model=model, params=case.params.replace(penalty_alpha=0.1))
+    params = case.params.for_model(model).replace(penalty_alpha=0.1)
+    case = case.replace(model=model, params=params)
     assert {"sphjax_solid_momentum", "sphjax_momentum"} <= compiled_loops(natively(case))
     xla = sphjax.simulate(case, n_steps=40).final
     loops = sphjax.simulate(natively(case), n_steps=40).final

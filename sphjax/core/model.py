@@ -84,7 +84,7 @@ class Model:
         equal (2,640 particles: two blocks of 1,320).
       pair_loop: ``"xla"`` (default) evaluates every pair sum in XLA, each pair from
         both sides; ``"native"`` evaluates the fluid's own density and momentum sums
-        and an elastic solid's deformation gradient and momentum (first-order gradient
+        and an elastic solid's momentum with the penalty force (first-order gradient
         correction) with the compiled loops of :mod:`sphjax.native` (each pair once,
         threads over rows; the CPU only, built with the machine's C++ compiler at first
         use), and

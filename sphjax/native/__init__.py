@@ -25,6 +25,10 @@ its reference neighbours, the pair geometry recomputed from the reference positi
 * ``solid_deformation``: the deformation gradient ``F`` (eq. 16);
 * ``solid_momentum``: eq. 14's elastic pair forces with Ganzenmüller's penalty force.
 
+A run uses the second with the penalty force only: XLA's sums over the reference geometry
+stored once per run are faster than the first, and than the second without the penalty
+(docs/performance.md).
+
 ``cell_list.cc`` rebuilds the neighbour search's list (:func:`cell_list_rebuild`, used by
 :class:`sphjax.neighbors.NeighborSearch` when ``SearchGeometry.native``): a counting sort
 into cells at least as wide as the search radius and a scan of the cells around each
