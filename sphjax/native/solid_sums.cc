@@ -128,16 +128,16 @@ struct SolidMomentumTerm {
         dx[i] = box.image(o.x[i] - x_b[i * stride], i);
         r2 += dx[i] * dx[i];
       }
+      // (eps . u) u = (eps . x_ab) x_ab / |x_ab|^2: no square root
       const bool ok = (r2 > T(0)) & (p.r2 > T(0));
-      const T inverse_r = ok ? T(1) / std::sqrt(ok ? r2 : T(1)) : T(0);
-      T delta = T(0);
+      T along = T(0);  // (eps_a + eps_b) . x_ab
       for (int i = 0; i < D; i++) {
         T eps = T(-2) * dx[i];
         for (int j = 0; j < D; j++) eps += (o.F[i * D + j] + F_b[(i * D + j) * stride]) * p.dr[j];
-        delta += eps * dx[i];
+        along += eps * dx[i];
       }
-      const T weight = ok ? p.w / (ok ? p.r2 : T(1)) : T(0);
-      const T magnitude = stiffness * weight * delta * inverse_r * inverse_r * inverse_rho0;
+      const T magnitude =
+          ok ? stiffness * inverse_rho0 * p.w * along / (ok ? p.r2 * r2 : T(1)) : T(0);
       for (int i = 0; i < D; i++) acceleration[i] += magnitude * dx[i];
     }
     for (int i = 0; i < D; i++) {
