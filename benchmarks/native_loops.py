@@ -9,13 +9,15 @@ every round (``--rounds``), so a change of load hits both.  Cases: ``tg10k``/``t
 (2D Taylor-Green as in ``throughput.py``: quintic spline, ``h = dx``, summation density,
 Morris viscosity, float32), ``dam`` (dam break ``n = 80``, 15k particles, the case's
 defaults: continuity density with Molteni & Colagrossi's diffusion, Monaghan viscosity,
-no-slip walls), ``abc32`` (3D ABC flow at 32^3 without transport velocity).  Prints, per
-case, the best wall-clock and CPU milliseconds per step of each loop and the ratios
-(xla / native: above 1 means the native loops are faster), and the load average before
-and after.  ``--baseline DIR`` also runs ``pair_loop="native"`` with the sphjax of another
-checkout (e.g. a git worktree of an earlier commit), alternating with the others, and
-adds its figures and the ratio baseline / native.  A benchmark reports; it asserts
-nothing.
+no-slip walls), ``abc32`` (3D ABC flow at 32^3 without transport velocity), ``plate``
+(the oscillating plate ``n = 32`` of ``solid_throughput.py``, 10k solid particles,
+Wendland C2), ``plate_penalty`` (the same with Ganzenmüller's penalty force, alpha
+0.1).  Prints, per case, the best wall-clock and CPU milliseconds per step of each loop
+and the ratios (xla / native: above 1 means the native loops are faster), and the load
+average before and after.  ``--baseline DIR`` also runs ``pair_loop="native"`` with the
+sphjax of another checkout (e.g. a git worktree of an earlier commit), alternating with
+the others, and adds its figures and the ratio baseline / native.  A benchmark reports;
+it asserts nothing.
 """
 
 from __future__ import annotations
@@ -39,6 +41,10 @@ if name.startswith("tg"):
 elif name == "dam":
     case = sphjax.cases.dam_break(n=80)
     dt = case.dt
+elif name.startswith("plate"):
+    penalty = 0.1 if name == "plate_penalty" else None
+    case = sphjax.cases.oscillating_plate(n=32, penalty_alpha=penalty)
+    dt = case.dt
 else:
     case = sphjax.cases.abc_flow_3d(n=32, transport_velocity=False, relax_iterations=50)
     dt = case.dt
@@ -57,7 +63,7 @@ print("RESULT " + json.dumps(dict(n=case.n_particles, wall=min(wall) / steps,
                                   cpu=min(cpu) / steps, source=sphjax.__file__)))
 """
 
-CASES = ("tg10k", "tg40k", "dam", "abc32")
+CASES = ("tg10k", "tg40k", "dam", "abc32", "plate", "plate_penalty")
 LOOPS = ("xla", "native")
 
 

@@ -252,7 +252,8 @@ def _add_run(sub) -> None:
         "--pair-loop",
         choices=("xla", "native"),
         default="xla",
-        help="'native': the fluid's own pair sums as compiled loops, each pair once "
+        help="'native': a fluid's and an elastic solid's own pair sums as compiled loops, "
+        "each pair once "
         "(CPU only; built with the machine's C++ compiler at first use); see "
         "Model.pair_loop",
     )

@@ -84,8 +84,10 @@ class Model:
         equal (2,640 particles: two blocks of 1,320).
       pair_loop: ``"xla"`` (default) evaluates every pair sum in XLA, each pair from
         both sides; ``"native"`` evaluates the fluid's own density and momentum sums
-        with the compiled loops of :mod:`sphjax.native` (each pair once, threads over
-        rows; the CPU only, built with the machine's C++ compiler at first use), and
+        and an elastic solid's momentum with the penalty force (first-order gradient
+        correction) with the compiled loops of :mod:`sphjax.native` (each pair once,
+        threads over rows; the CPU only, built with the machine's C++ compiler at first
+        use), and
         rebuilds the neighbour list with its compiled cell list (the same list as
         jax-md's).  Derivatives are the same either way: they always go through XLA.
     """
@@ -150,10 +152,10 @@ class Model:
 
     def _check_native(self):
         """Refuse ``pair_loop="native"`` where no pair sum of the model would use it."""
-        if not any(getattr(s, "params_group", None) == "fluid" for s in self.systems):
+        if not any(getattr(s, "native_pair_sums", False) for s in self.systems):
             raise ValueError(
-                "Model.pair_loop='native' has loops for a fluid's own pair sums only and "
-                "this model has no fluid; use pair_loop='xla'"
+                "Model.pair_loop='native' has loops for the own pair sums of a fluid and "
+                "of an elastic solid only and this model has neither; use pair_loop='xla'"
             )
         if type(self.kernel) not in KERNELS.values():
             raise ValueError(

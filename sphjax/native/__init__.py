@@ -19,6 +19,16 @@ The kernel sum, the velocity divergence and the momentum also run between two sy
 from the row's side, rows shared between threads, which spares XLA's gathers of the
 neighbours' fields and its per-pair temporaries.
 
+``solid_sums.cc`` has the two pair sums of an elastic solid (total-Lagrangian SPH) over
+its reference neighbours, the pair geometry recomputed from the reference positions:
+
+* ``solid_deformation``: the deformation gradient ``F`` (eq. 16);
+* ``solid_momentum``: eq. 14's elastic pair forces with Ganzenmüller's penalty force.
+
+A run uses the second with the penalty force only: XLA's sums over the reference geometry
+stored once per run are faster than the first, and than the second without the penalty
+(docs/performance.md).
+
 ``cell_list.cc`` rebuilds the neighbour search's list (:func:`cell_list_rebuild`, used by
 :class:`sphjax.neighbors.NeighborSearch` when ``SearchGeometry.native``): a counting sort
 into cells at least as wide as the search radius and a scan of the cells around each
@@ -52,8 +62,11 @@ import numpy as np
 
 from sphjax.core.kernels import KERNELS
 
-#: the library's sources: the pair sums and the neighbour search's cell list
-SOURCES = tuple(Path(__file__).with_name(name) for name in ("pair_sums.cc", "cell_list.cc"))
+#: the library's sources: the pair sums (a fluid's, a solid's) and the neighbour search's
+#: cell list
+SOURCES = tuple(
+    Path(__file__).with_name(name) for name in ("pair_sums.cc", "solid_sums.cc", "cell_list.cc")
+)
 #: the headers they include (part of the build's key)
 HEADERS = tuple(Path(__file__).with_name(name) for name in ("threads.h", "pair_loop.h"))
 FLAGS = (
@@ -67,13 +80,16 @@ FLAGS = (
     "-fPIC",
     "-pthread",
 )
-#: the handlers of ``pair_sums.cc`` and ``cell_list.cc``: XLA target name -> exported symbol
+#: the handlers of ``pair_sums.cc``, ``solid_sums.cc`` and ``cell_list.cc``: XLA target name
+#: -> exported symbol
 TARGETS = {
     "sphjax_kernel_sum": "SphjaxKernelSum",
     "sphjax_velocity_divergence": "SphjaxVelocityDivergence",
     "sphjax_continuity_molteni": "SphjaxContinuityMolteni",
     "sphjax_momentum": "SphjaxMomentum",
     "sphjax_extrapolation": "SphjaxExtrapolation",
+    "sphjax_solid_deformation": "SphjaxSolidDeformation",
+    "sphjax_solid_momentum": "SphjaxSolidMomentum",
     "sphjax_cell_list_rebuild": "SphjaxCellListRebuild",
 }
 #: the kernels ``pair_sums.cc`` knows, by name (its ids)
@@ -199,6 +215,15 @@ def _call(target, shape, dtype, geometry, *args, cross: bool = False, **attribut
     return call(*args, **_attributes(geometry), cross=bool(cross), **attributes)
 
 
+def _within(target, shape, dtype, geometry, *args, **attributes):
+    """:func:`_call` of a handler that sums within one system only (``solid_sums.cc``: no
+    ``cross`` attribute)."""
+    register()
+    result = jax.ShapeDtypeStruct(shape, dtype)
+    call = jax.ffi.ffi_call(target, result, vmap_method="sequential")
+    return call(*args, **_attributes(geometry), **attributes)
+
+
 def _list(idx):
     return idx.astype(np.int32)
 
@@ -292,6 +317,54 @@ def extrapolation(rows, idx, geometry, columns):
         *fields,
         _list(idx),
         cross=True,
+    )
+
+
+def solid_deformation(X, x, V, L0, idx, geometry):
+    """The deformation gradient ``F_a = -sum_b V0_b x_ab (L0_a grad0_a W(X_ab))^T``
+    (eq. 16), ``[N, d, d]``, over the symmetric reference list ``idx``.
+
+    Args:
+      X: ``[N, d]`` reference positions (the pair geometry: ``X_ab``, ``grad0_a W``).
+      x: ``[N, d]`` current positions (``x_ab``, minimum image).
+      V: ``[N]`` reference volumes ``V0``.
+      L0: ``[N, d, d]`` the correction matrices (eq. 15).
+    """
+    n, d = X.shape
+    return _within(
+        "sphjax_solid_deformation", (n, d, d), X.dtype, geometry, X, x, V, L0, _list(idx)
+    )
+
+
+def solid_momentum(X, x, V, PL0, F, idx, geometry, parameters, *, penalty: bool):
+    """Eq. 14's pair terms per unit of the rows' own mass, ``[N, d]``:
+    ``sum_b V0_b [(P L0)_a + (P L0)_b] grad0_a W(X_ab) / rho0`` plus, with ``penalty``,
+    Ganzenmüller's (2015) hourglass force ``f^PF_a / m0_a``
+    (:func:`sphjax.physics.solid.penalty.penalty_force`), over the symmetric reference list
+    ``idx``.
+
+    Args:
+      X, x: ``[N, d]`` reference and current positions.
+      V: ``[N]`` reference volumes.
+      PL0: ``[N, d, d]`` ``P_a L0_a``, the first Piola-Kirchhoff stress times eq. 15's
+        correction.
+      F: ``[N, d, d]`` deformation gradients (read by the penalty force only).
+      parameters: ``(solid_density, young_modulus, penalty_alpha)``.
+    """
+    scalars = [jax.numpy.asarray(q, X.dtype) for q in parameters]
+    return _within(
+        "sphjax_solid_momentum",
+        X.shape,
+        X.dtype,
+        geometry,
+        X,
+        x,
+        V,
+        PL0,
+        F,
+        _list(idx),
+        *scalars,
+        penalty=bool(penalty),
     )
 
 

@@ -321,6 +321,37 @@ def _solid_pullback(pair, a, b, shared, bar, *, domain, penalty):
 pair_sums.define_pullback(_solid_summand, _solid_pullback)
 
 
+def _solid_loop(keywords, geometry, weight, parity, cross):
+    """The compiled loop of :func:`_solid_summand` with Ganzenmüller's penalty force
+    (eq. 14), each pair once; ``None`` without the penalty force, whose elastic term alone
+    XLA sums faster over the reference geometry stored once per run (measured on the
+    oscillating plate, docs/performance.md)."""
+    if cross or not keywords["penalty"] or weight != "V" or parity != -1:
+        return None
+    if keywords["domain"] != geometry.domain:
+        return None
+
+    def loop(rows, cols, idx, shared):
+        parameters = (shared.solid_density, shared.young_modulus, shared.penalty_alpha)
+        a = native.solid_momentum(
+            rows["x"],
+            rows["xc"],
+            rows["V"],
+            rows["PL0"],
+            rows["F"],
+            idx,
+            geometry,
+            parameters,
+            penalty=keywords["penalty"],
+        )
+        return {"a": a}
+
+    return loop
+
+
+pair_sums.define_native(_solid_summand, _solid_loop)
+
+
 def _solid_summand_second_order(pair, a, b, shared, *, domain, penalty, h):
     """Eq. 14 with the second-order gradient ``psi_ab = G_a omega_ab p(X_ba)``
     (:mod:`sphjax.physics.solid.correction`), per unit neighbour volume: the variational

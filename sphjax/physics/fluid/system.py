@@ -67,6 +67,9 @@ class FluidSystem:
     #: the Params group it reads
     params_group = "fluid"
 
+    #: its own pair sums have compiled loops (``Model.pair_loop="native"``)
+    native_pair_sums = True
+
     def __post_init__(self):
         if not isinstance(self.density, SummationDensity | ContinuityDensity):
             raise ValueError(

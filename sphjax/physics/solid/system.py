@@ -105,6 +105,9 @@ class SolidSystem:
     #: the Params group it reads
     params_group = "solid"
 
+    #: its own pair sums have compiled loops (``Model.pair_loop="native"``)
+    native_pair_sums = True
+
     def __post_init__(self):
         if not hasattr(self.material, "pk1"):
             raise ValueError(
@@ -270,6 +273,10 @@ pair_sums.define_pullback(_deformation_summand, _deformation_pullback)
 # the oscillating plate n = 16 (docs/performance_gradients.md); the pull-back stays, tested,
 # for `benchmarks/pair_costs.py` to re-measure on other hardware
 pair_sums.transpose_by_autodiff(_deformation_summand)
+
+# no compiled loop here (sphjax.native.solid_deformation has one, each pair once): with the
+# reference geometry stored once per run, XLA's sum is faster on the CPU (the oscillating
+# plate n = 32: 0.2 CPU-ms per sum against 0.9; docs/performance.md)
 
 
 def _second_order_moment_summand(pair, a, b, shared, *, h):

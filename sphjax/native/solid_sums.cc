@@ -1,0 +1,322 @@
+// The pair sums of an elastic solid (total-Lagrangian SPH) as compiled loops, called
+// from XLA (FFI handlers).
+//
+// Both go over the solid's reference neighbour list (symmetric: b in N(a) iff a in N(b))
+// with pair_loop.h's each_pair_once, each pair once, its term added to both particles.
+// The pair geometry of the loop is the reference one: X_ab = X_a - X_b (minimum image on
+// periodic axes), W(X_ab) and grad0_a W(X_ab), from the reference positions X; the
+// current positions x are a field of the sums (x_ab = x_a - x_b, minimum image).
+//
+//   sphjax_solid_deformation  F_a = S_a L0_a^T,  S_a = sum_b -V0_b x_ab grad0_a W(X_ab)^T
+//                             (eq. 16: F_a = -sum_b V0_b x_ab (L0_a grad0_a W)^T; the pair
+//                             term of S is symmetric under a <-> b, as x_ab and grad0 W
+//                             both change sign, so L0_a, which is not, comes after the sum)
+//   sphjax_solid_momentum     sum_b V0_b [(P L0)_a + (P L0)_b] grad0_a W(X_ab) / rho0
+//                             + the penalty force f^PF_ab / (V0_a V0_b rho0)
+//                             (eq. 14 per unit mass with rho0 = m0 / V0; Ganzenmüller 2015's
+//                             hourglass penalty, sphjax.physics.solid.penalty), antisymmetric
+//                             under a <-> b: b receives -V0_a times a's term.
+#include <cmath>
+#include <cstdint>
+#include <vector>
+
+#include "pair_loop.h"
+#include "xla/ffi/api/ffi.h"
+
+using namespace sphjax_native;
+
+namespace {
+
+// x_a - x_b with the minimum image on the box's periodic axes (size 0 elsewhere)
+template <typename T, int D>
+struct Box {
+  T size[D], inverse[D];
+  static Box of(const Setting<T>& s) {
+    Box box;
+    for (int i = 0; i < D; i++) {
+      box.size[i] = s.size[i];
+      box.inverse[i] = s.inverse[i];
+    }
+    return box;
+  }
+  T image(T d, int i) const { return d - size[i] * std::nearbyint(d * inverse[i]); }
+};
+
+template <typename T, int D>
+struct OwnDeformation {
+  T V, x[D];
+};
+
+// eq. 16's pair term before L0: -x_ab grad0_a W(X_ab)^T, times V0_b for a and V0_a for b
+// (S_ij = sum_b -V0_b x_ab,i grad0 W_j)
+template <typename T, int D>
+struct DeformationTerm {
+  static constexpr int width = D * D, fields = 1 + D;
+  const T *V, *x;
+  Box<T, D> box;
+  void load(int64_t b, T* into, int64_t stride) const {
+    into[0] = V[b];
+    for (int i = 0; i < D; i++) into[(1 + i) * stride] = x[b * D + i];
+  }
+  OwnDeformation<T, D> row(int64_t a) const {
+    OwnDeformation<T, D> o{V[a], {}};
+    for (int i = 0; i < D; i++) o.x[i] = x[a * D + i];
+    return o;
+  }
+  void pair(const OwnDeformation<T, D>& o, const Pair<T, D>& p, const T* from, int64_t stride,
+            T* on_a, T* on_b) const {
+    const T V_b = from[0];
+    for (int i = 0; i < D; i++) {
+      const T dx = box.image(o.x[i] - from[(1 + i) * stride], i);
+      for (int j = 0; j < D; j++) {
+        const T s = -dx * p.grad[j];
+        on_a[(i * D + j) * stride] = V_b * s;
+        on_b[(i * D + j) * stride] = o.V * s;
+      }
+    }
+  }
+};
+
+template <typename T, int D>
+struct OwnSolid {
+  T V, x[D], PL0[D * D], F[D * D];
+};
+
+// eq. 14 per pair per unit neighbour volume, with Ganzenmüller's penalty force when
+// Penalty: on a V0_b times it, on b -V0_a times it.  Fields per neighbour: V0, P L0 and,
+// with the penalty, x and F.
+template <typename T, int D, bool Penalty>
+struct SolidMomentumTerm {
+  static constexpr int width = D, fields = 1 + D * D + (Penalty ? D + D * D : 0);
+  const T *V, *x, *PL0, *F;
+  Box<T, D> box;
+  T inverse_rho0, stiffness;  // 1 / rho0 and alpha E / 2
+  void load(int64_t b, T* into, int64_t stride) const {
+    into[0] = V[b];
+    for (int i = 0; i < D * D; i++) into[(1 + i) * stride] = PL0[b * D * D + i];
+    if (Penalty) {
+      for (int i = 0; i < D; i++) into[(1 + D * D + i) * stride] = x[b * D + i];
+      for (int i = 0; i < D * D; i++) into[(1 + D * D + D + i) * stride] = F[b * D * D + i];
+    }
+  }
+  OwnSolid<T, D> row(int64_t a) const {
+    OwnSolid<T, D> o{V[a], {}, {}, {}};
+    for (int i = 0; i < D * D; i++) o.PL0[i] = PL0[a * D * D + i];
+    if (Penalty) {
+      for (int i = 0; i < D; i++) o.x[i] = x[a * D + i];
+      for (int i = 0; i < D * D; i++) o.F[i] = F[a * D * D + i];
+    }
+    return o;
+  }
+  void pair(const OwnSolid<T, D>& o, const Pair<T, D>& p, const T* from, int64_t stride,
+            T* on_a, T* on_b) const {
+    const T V_b = from[0];
+    T acceleration[D];
+    for (int i = 0; i < D; i++) {  // ((P L0)_a + (P L0)_b) grad0_a W / rho0
+      T sum = T(0);
+      for (int j = 0; j < D; j++)
+        sum += (o.PL0[i * D + j] + from[(1 + i * D + j) * stride]) * p.grad[j];
+      acceleration[i] = sum * inverse_rho0;
+    }
+    if (Penalty) {
+      // f_ab = alpha E / 2 W0 / |X_ab|^2 (eps_a + eps_b) . u u,  eps = F X_ab - x_ab,
+      // u = x_ab / |x_ab|; none for coincident particles (now or in the reference)
+      const T* x_b = from + (1 + D * D) * stride;
+      const T* F_b = from + (1 + D * D + D) * stride;
+      T dx[D], r2 = T(0);
+      for (int i = 0; i < D; i++) {
+        dx[i] = box.image(o.x[i] - x_b[i * stride], i);
+        r2 += dx[i] * dx[i];
+      }
+      // (eps . u) u = (eps . x_ab) x_ab / |x_ab|^2: no square root
+      const bool ok = (r2 > T(0)) & (p.r2 > T(0));
+      T along = T(0);  // (eps_a + eps_b) . x_ab
+      for (int i = 0; i < D; i++) {
+        T eps = T(-2) * dx[i];
+        for (int j = 0; j < D; j++) eps += (o.F[i * D + j] + F_b[(i * D + j) * stride]) * p.dr[j];
+        along += eps * dx[i];
+      }
+      const T magnitude =
+          ok ? stiffness * inverse_rho0 * p.w * along / (ok ? p.r2 * r2 : T(1)) : T(0);
+      for (int i = 0; i < D; i++) acceleration[i] += magnitude * dx[i];
+    }
+    for (int i = 0; i < D; i++) {
+      on_a[i * stride] = V_b * acceleration[i];
+      on_b[i * stride] = -o.V * acceleration[i];
+    }
+  }
+};
+
+template <typename T, int D>
+void deformation_gradient(ffi::ThreadPool* pool, int kernel, const Setting<T>& s, const T* X,
+                          const T* x, const T* V, const T* L0, const int32_t* idx, int64_t n,
+                          int64_t k, T* F) {
+  std::vector<T> S(n * D * D);
+  by_kernel<T, D>(pool, kernel, s, X, idx, n, k, S.data(),
+                  DeformationTerm<T, D>{V, x, Box<T, D>::of(s)});
+  for (int64_t a = 0; a < n; a++) {  // F_a = S_a L0_a^T
+    const T* Sa = S.data() + a * D * D;
+    const T* La = L0 + a * D * D;
+    for (int i = 0; i < D; i++)
+      for (int j = 0; j < D; j++) {
+        T sum = T(0);
+        for (int m = 0; m < D; m++) sum += Sa[i * D + m] * La[j * D + m];
+        F[a * D * D + i * D + j] = sum;
+      }
+  }
+}
+
+template <typename T, int D>
+void solid_momentum(ffi::ThreadPool* pool, int kernel, const Setting<T>& s, const T* X,
+                    const T* x, const T* V, const T* PL0, const T* F, const int32_t* idx,
+                    int64_t n, int64_t k, T rho0, T young_modulus, T alpha, bool penalty,
+                    T* out) {
+  const T inverse_rho0 = T(1) / rho0, stiffness = T(0.5) * alpha * young_modulus;
+  if (penalty) {
+    SolidMomentumTerm<T, D, true> term{V, x, PL0, F, Box<T, D>::of(s), inverse_rho0, stiffness};
+    by_kernel<T, D>(pool, kernel, s, X, idx, n, k, out, term);
+  } else {
+    SolidMomentumTerm<T, D, false> term{V, x, PL0, F, Box<T, D>::of(s), inverse_rho0, stiffness};
+    by_kernel<T, D>(pool, kernel, s, X, idx, n, k, out, term);
+  }
+}
+
+// ------------------------------------------------------------------ FFI handlers
+
+template <typename T>
+const T* data(const ffi::AnyBuffer& buffer) {
+  return reinterpret_cast<const T*>(buffer.untyped_data());
+}
+
+template <typename T>
+T* data(ffi::Result<ffi::AnyBuffer>& buffer) {
+  return reinterpret_cast<T*>(buffer->untyped_data());
+}
+
+ffi::Error check(const ffi::AnyBuffer& X, const ffi::Buffer<ffi::S32>& idx) {
+  auto dims = X.dimensions();
+  if (dims.size() != 2 || (dims[1] != 2 && dims[1] != 3))
+    return ffi::Error::InvalidArgument("reference positions must be [N, 2] or [N, 3]");
+  if (X.element_type() != ffi::F32 && X.element_type() != ffi::F64)
+    return ffi::Error::InvalidArgument("reference positions must be float32 or float64");
+  if (idx.dimensions().size() != 2 || idx.dimensions()[0] != dims[0])
+    return ffi::Error::InvalidArgument("the neighbour list must be [N, K]");
+  return ffi::Error::Success();
+}
+
+// body.template operator()<T, D>() for the call's element type and dimension
+template <typename Body>
+ffi::Error dispatch(const ffi::AnyBuffer& X, const Body& body) {
+  const bool single = X.element_type() == ffi::F32;
+  const int64_t dim = X.dimensions()[1];
+  if (single && dim == 2) body.template operator()<float, 2>();
+  if (single && dim == 3) body.template operator()<float, 3>();
+  if (!single && dim == 2) body.template operator()<double, 2>();
+  if (!single && dim == 3) body.template operator()<double, 3>();
+  return ffi::Error::Success();
+}
+
+template <typename T>
+T scalar(const ffi::AnyBuffer& buffer) {
+  return *data<T>(buffer);
+}
+
+#define SPHJAX_SOLID_SETTING_ATTRS                                                          \
+  int64_t kernel, double h, double cutoff, double sigma, double lx, double ly, double lz, \
+      int64_t periodic
+
+#define SPHJAX_SOLID_BIND_SETTING(binding) \
+  binding.Attr<int64_t>("kernel")          \
+      .Attr<double>("h")                   \
+      .Attr<double>("cutoff")              \
+      .Attr<double>("sigma")               \
+      .Attr<double>("lx")                  \
+      .Attr<double>("ly")                  \
+      .Attr<double>("lz")                  \
+      .Attr<int64_t>("periodic")
+
+struct DeformationBody {
+  ffi::ThreadPool* pool;
+  const ffi::AnyBuffer &X, &x, &V, &L0;
+  const int32_t* idx;
+  int64_t n, k;
+  ffi::Result<ffi::AnyBuffer>& F;
+  int64_t kernel;
+  double h, cutoff, sigma, lx, ly, lz;
+  int64_t periodic;
+  template <typename T, int D>
+  void operator()() const {
+    const Setting<T> s = setting<T>(D, h, cutoff, sigma, lx, ly, lz, periodic);
+    deformation_gradient<T, D>(pool, int(kernel), s, data<T>(X), data<T>(x), data<T>(V),
+                               data<T>(L0), idx, n, k, data<T>(F));
+  }
+};
+
+ffi::Error SolidDeformation(ffi::ThreadPool pool, ffi::AnyBuffer X, ffi::AnyBuffer x,
+                            ffi::AnyBuffer V, ffi::AnyBuffer L0, ffi::Buffer<ffi::S32> idx,
+                            ffi::Result<ffi::AnyBuffer> F, SPHJAX_SOLID_SETTING_ATTRS) {
+  if (auto e = check(X, idx); e.failure()) return e;
+  DeformationBody body{&pool, X,      x,     V,  L0, idx.typed_data(), X.dimensions()[0],
+                       idx.dimensions()[1], F, kernel, h, cutoff, sigma, lx,
+                       ly,    lz,     periodic};
+  return dispatch(X, body);
+}
+
+struct MomentumBody {
+  ffi::ThreadPool* pool;
+  const ffi::AnyBuffer &X, &x, &V, &PL0, &F, &rho0, &young_modulus, &alpha;
+  const int32_t* idx;
+  int64_t n, k;
+  ffi::Result<ffi::AnyBuffer>& out;
+  int64_t kernel;
+  double h, cutoff, sigma, lx, ly, lz;
+  int64_t periodic;
+  bool penalty;
+  template <typename T, int D>
+  void operator()() const {
+    const Setting<T> s = setting<T>(D, h, cutoff, sigma, lx, ly, lz, periodic);
+    solid_momentum<T, D>(pool, int(kernel), s, data<T>(X), data<T>(x), data<T>(V),
+                         data<T>(PL0), data<T>(F), idx, n, k, scalar<T>(rho0),
+                         scalar<T>(young_modulus), scalar<T>(alpha), penalty, data<T>(out));
+  }
+};
+
+ffi::Error SolidMomentum(ffi::ThreadPool pool, ffi::AnyBuffer X, ffi::AnyBuffer x,
+                         ffi::AnyBuffer V, ffi::AnyBuffer PL0, ffi::AnyBuffer F,
+                         ffi::Buffer<ffi::S32> idx, ffi::AnyBuffer rho0,
+                         ffi::AnyBuffer young_modulus, ffi::AnyBuffer alpha,
+                         ffi::Result<ffi::AnyBuffer> out, SPHJAX_SOLID_SETTING_ATTRS,
+                         bool penalty) {
+  if (auto e = check(X, idx); e.failure()) return e;
+  MomentumBody body{&pool,   X,      x,     V,     PL0, F,  rho0, young_modulus, alpha,
+                    idx.typed_data(), X.dimensions()[0], idx.dimensions()[1], out, kernel, h,
+                    cutoff,  sigma,  lx,    ly,    lz,  periodic, penalty};
+  return dispatch(X, body);
+}
+
+}  // namespace
+
+XLA_FFI_DEFINE_HANDLER_SYMBOL(SphjaxSolidDeformation, SolidDeformation,
+                              SPHJAX_SOLID_BIND_SETTING(ffi::Ffi::Bind()
+                                                            .Ctx<ffi::ThreadPool>()
+                                                            .Arg<ffi::AnyBuffer>()
+                                                            .Arg<ffi::AnyBuffer>()
+                                                            .Arg<ffi::AnyBuffer>()
+                                                            .Arg<ffi::AnyBuffer>()
+                                                            .Arg<ffi::Buffer<ffi::S32>>()
+                                                            .Ret<ffi::AnyBuffer>()));
+
+XLA_FFI_DEFINE_HANDLER_SYMBOL(SphjaxSolidMomentum, SolidMomentum,
+                              SPHJAX_SOLID_BIND_SETTING(ffi::Ffi::Bind()
+                                                            .Ctx<ffi::ThreadPool>()
+                                                            .Arg<ffi::AnyBuffer>()
+                                                            .Arg<ffi::AnyBuffer>()
+                                                            .Arg<ffi::AnyBuffer>()
+                                                            .Arg<ffi::AnyBuffer>()
+                                                            .Arg<ffi::AnyBuffer>()
+                                                            .Arg<ffi::Buffer<ffi::S32>>()
+                                                            .Arg<ffi::AnyBuffer>()
+                                                            .Arg<ffi::AnyBuffer>()
+                                                            .Arg<ffi::AnyBuffer>()
+                                                            .Ret<ffi::AnyBuffer>())
+                                  .Attr<bool>("penalty"));
