@@ -155,17 +155,40 @@ def library() -> str:
         fcntl.flock(lock, fcntl.LOCK_EX)  # one build at a time (test workers, processes)
         if not target.exists():
             partial = target.with_suffix(f".{os.getpid()}.tmp")
-            command = [cxx, *FLAGS, "-I", jax.ffi.include_dir(), "-o", str(partial)]
-            command += [str(source) for source in SOURCES]
-            built = subprocess.run(command, capture_output=True, text=True)
-            if built.returncode != 0:
-                last = (built.stderr.strip().splitlines() or ["no message"])[-1]
-                raise NativeUnavailable(
-                    f"Model.pair_loop='native': {cxx} could not build sphjax's pair loops "
-                    f"({last}); use pair_loop='xla'"
-                )
+            _build(cxx, partial)
             os.replace(partial, target)
     return str(target)
+
+
+def _build(cxx: str, target: Path) -> None:
+    """Compile the sources side by side (one compiler process each: the machine's cores
+    share the work), then link them into ``target``."""
+    include = ["-I", jax.ffi.include_dir()]
+    objects = [target.with_suffix(f".{source.stem}.o") for source in SOURCES]
+    compiles = [
+        subprocess.Popen(
+            [cxx, *FLAGS, *include, "-c", str(source), "-o", str(obj)],
+            stdout=subprocess.DEVNULL,
+            stderr=subprocess.PIPE,
+            text=True,
+        )
+        for source, obj in zip(SOURCES, objects, strict=True)
+    ]
+    errors = [process.communicate()[1] for process in compiles]
+    failures = [e for process, e in zip(compiles, errors, strict=True) if process.returncode]
+    if not failures:
+        linked = subprocess.run(
+            [cxx, *FLAGS, "-o", str(target), *map(str, objects)], capture_output=True, text=True
+        )
+        failures = [linked.stderr] if linked.returncode != 0 else []
+    for obj in objects:
+        obj.unlink(missing_ok=True)
+    if failures:
+        last = (failures[0].strip().splitlines() or ["no message"])[-1]
+        raise NativeUnavailable(
+            f"Model.pair_loop='native': {cxx} could not build sphjax's pair loops "
+            f"({last}); use pair_loop='xla'"
+        )
 
 
 @functools.cache

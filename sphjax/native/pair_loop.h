@@ -129,7 +129,8 @@ inline Pair<T, D> pair_of(const Setting<T>& s, const T* xa, const T* xb, int64_t
 // the loop has no branch.  Threads take equal ranges of rows, each with its own output
 // copy.
 //
-// A Term: `width` numbers per particle out, `fields` numbers per neighbour gathered by
+// A Term: `within` and `between`: whether it sums within one system (each_pair_once)
+// and between two (rows_against_columns); `width` numbers per particle out, `fields` numbers per neighbour gathered by
 // load(b, into, stride) (into[f * stride] for f < fields), row(a): what it reads of a,
 // pair(own, p, from, stride, on_a, on_b): the pair's numbers for a and for b
 // (on_a[w * stride], on_b[w * stride] for w < width).
@@ -245,11 +246,13 @@ void sum_pairs(ffi::ThreadPool* pool, int kernel, const Setting<T>& s, const T* 
                int64_t k, T* out, const Term& rows, const Term* columns) {
   auto with = [&](auto shape) {
     constexpr int K = decltype(shape)::value;
-    if (columns == nullptr)
-      each_pair_once<T, D, K>(pool, s, x_rows, idx, n_rows, k, out, rows);
-    else
-      rows_against_columns<T, D, K>(pool, s, x_rows, x_columns, idx, n_rows, n_columns, k,
-                                    out, rows, *columns);
+    if constexpr (Term::within)  // (only the loops a Term has are compiled)
+      if (columns == nullptr)
+        return each_pair_once<T, D, K>(pool, s, x_rows, idx, n_rows, k, out, rows);
+    if constexpr (Term::between)
+      if (columns != nullptr)
+        return rows_against_columns<T, D, K>(pool, s, x_rows, x_columns, idx, n_rows,
+                                             n_columns, k, out, rows, *columns);
   };
   switch (kernel) {
     case 0: return with(std::integral_constant<int, 0>{});

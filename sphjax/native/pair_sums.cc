@@ -42,6 +42,7 @@ constexpr double kEta2 = 0.01;  // the 0.01 h^2 in the viscous denominators
 
 template <typename T, int D>
 struct KernelSumTerm {  // sum_b m_b W_ab
+  static constexpr bool within = true, between = true;
   static constexpr int width = 1, fields = 1;
   const T* m;
   void load(int64_t b, T* into, int64_t stride) const { into[0] = m[b]; }
@@ -59,6 +60,7 @@ struct Own {  // what the divergence and the diffusion read of a
 
 template <typename T, int D>
 struct DivergenceTerm {  // sum_b m_b (v_a - v_b) . grad_a W_ab
+  static constexpr bool within = true, between = true;
   static constexpr int width = 1, fields = 1 + D;
   const T *m, *v;
   void load(int64_t b, T* into, int64_t stride) const {
@@ -89,6 +91,7 @@ struct DiffusionParameters {
 // same with a and b swapped (r_ba = -r_ab, grad_b W_ba = -grad_a W_ab)
 template <typename T, int D>
 struct MolteniTerm {
+  static constexpr bool within = true, between = false;
   static constexpr int width = 1, fields = 2 + D;
   const T *m, *v, *rho;
   T hydrostatic[D], diffusion, eta2;
@@ -131,6 +134,7 @@ struct OwnMomentum {
 // (antisymmetric); P = p / rho^2; the viscosities' switches are factors 0 or 1
 template <typename T, int D>
 struct MomentumTerm {
+  static constexpr bool within = true, between = true;
   static constexpr int width = D, fields = 4 + D;
   const T *m, *v, *rho, *P, *inv;
   T h, c0, alpha, beta, nu, artificial, morris, eta2;
@@ -255,6 +259,7 @@ void momentum(const Where& at, const Setting<T>& s, const MomentumParameters& mp
 // pair: W_ab, p_b W_ab, rho_b W_ab r_ab and W_ab v_b (rows against columns only)
 template <typename T, int D>
 struct ExtrapolationTerm {
+  static constexpr bool within = false, between = true;
   static constexpr int width = 2 + 2 * D, fields = 2 + D;
   const T *p, *rho, *v;
   void load(int64_t b, T* into, int64_t stride) const {

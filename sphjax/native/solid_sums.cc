@@ -51,6 +51,7 @@ struct OwnDeformation {
 // (S_ij = sum_b -V0_b x_ab,i grad0 W_j)
 template <typename T, int D>
 struct DeformationTerm {
+  static constexpr bool within = true, between = false;
   static constexpr int width = D * D, fields = 1 + D;
   const T *V, *x;
   Box<T, D> box;
@@ -87,6 +88,7 @@ struct OwnSolid {
 // with the penalty, x and F.
 template <typename T, int D, bool Penalty>
 struct SolidMomentumTerm {
+  static constexpr bool within = true, between = false;
   static constexpr int width = D, fields = 1 + D * D + (Penalty ? D + D * D : 0);
   const T *V, *x, *PL0, *F;
   Box<T, D> box;
