@@ -252,8 +252,9 @@ def _add_run(sub) -> None:
         "--pair-loop",
         choices=("xla", "native"),
         default="xla",
-        help="'native': a fluid's and an elastic solid's own pair sums as compiled loops, "
-        "each pair once "
+        help="'native': pair sums as compiled loops (a fluid's own, each pair once, and "
+        "against walls, solids and bodies; an elastic solid's momentum with the penalty "
+        "force) "
         "(CPU only; built with the machine's C++ compiler at first use); see "
         "Model.pair_loop",
     )

@@ -219,6 +219,12 @@ def test_what_the_native_loops_cannot_do_is_refused_in_one_line(monkeypatch):
         ValueError, match=r"a fluid and of an elastic solid only .* use pair_loop='xla'"
     ):
         dataclasses.replace(walls, pair_loop="native")
+    # a solid without the penalty force: no loop a run would use (its sums stay XLA's)
+    plate = sphjax.cases.oscillating_plate(n=6)
+    with pytest.raises(ValueError, match=r"with its penalty force .* use pair_loop='xla'"):
+        dataclasses.replace(plate.model, pair_loop="native")
+    penalised = sphjax.cases.oscillating_plate(n=6, penalty_alpha=0.1)
+    assert dataclasses.replace(penalised.model, pair_loop="native").pair_loop == "native"
 
     @dataclasses.dataclass(frozen=True)
     class Gaussian(QuinticSpline):
@@ -244,7 +250,8 @@ def test_what_the_native_loops_cannot_do_is_refused_in_one_line(monkeypatch):
     "case",
     [
         ["taylor_green", "--n", "8", "--t-end", "0.011"],
-        ["oscillating_plate", "--n", "4", "--t-end", "0.001"],  # an elastic solid's loops
+        # an elastic solid's loop (its momentum with the penalty force)
+        ["oscillating_plate", "--n", "4", "--t-end", "0.001", "--case-arg", "penalty_alpha=0.1"],
     ],
     ids=["taylor_green", "oscillating_plate"],
 )

@@ -83,11 +83,12 @@ class Model:
         all at once); blocks keep each block's per-pair arrays in cache, and are made
         equal (2,640 particles: two blocks of 1,320).
       pair_loop: ``"xla"`` (default) evaluates every pair sum in XLA, each pair from
-        both sides; ``"native"`` evaluates the fluid's own density and momentum sums
-        and an elastic solid's momentum with the penalty force (first-order gradient
-        correction) with the compiled loops of :mod:`sphjax.native` (each pair once,
-        threads over rows; the CPU only, built with the machine's C++ compiler at first
-        use), and
+        both sides; ``"native"`` evaluates a fluid's density and momentum sums (its
+        own each pair once, and against walls, solids, bodies and open boundaries, with
+        the walls' pressure extrapolation) and an elastic solid's momentum with the
+        penalty force (first-order gradient correction) with the compiled loops of
+        :mod:`sphjax.native` (threads over rows; the CPU only, built with the machine's
+        C++ compiler at first use), and
         rebuilds the neighbour list with its compiled cell list (the same list as
         jax-md's).  Derivatives are the same either way: they always go through XLA.
     """
@@ -155,7 +156,8 @@ class Model:
         if not any(getattr(s, "native_pair_sums", False) for s in self.systems):
             raise ValueError(
                 "Model.pair_loop='native' has loops for the own pair sums of a fluid and "
-                "of an elastic solid only and this model has neither; use pair_loop='xla'"
+                "of an elastic solid only (the solid's with its penalty force and the "
+                "first-order correction) and this model has neither; use pair_loop='xla'"
             )
         if type(self.kernel) not in KERNELS.values():
             raise ValueError(

@@ -238,15 +238,6 @@ def _call(target, shape, dtype, geometry, *args, cross: bool = False, **attribut
     return call(*args, **_attributes(geometry), cross=bool(cross), **attributes)
 
 
-def _within(target, shape, dtype, geometry, *args, **attributes):
-    """:func:`_call` of a handler that sums within one system only (``solid_sums.cc``: no
-    ``cross`` attribute)."""
-    register()
-    result = jax.ShapeDtypeStruct(shape, dtype)
-    call = jax.ffi.ffi_call(target, result, vmap_method="sequential")
-    return call(*args, **_attributes(geometry), **attributes)
-
-
 def _list(idx):
     return idx.astype(np.int32)
 
@@ -354,9 +345,7 @@ def solid_deformation(X, x, V, L0, idx, geometry):
       L0: ``[N, d, d]`` the correction matrices (eq. 15).
     """
     n, d = X.shape
-    return _within(
-        "sphjax_solid_deformation", (n, d, d), X.dtype, geometry, X, x, V, L0, _list(idx)
-    )
+    return _call("sphjax_solid_deformation", (n, d, d), X.dtype, geometry, X, x, V, L0, _list(idx))
 
 
 def solid_momentum(X, x, V, PL0, F, idx, geometry, parameters, *, penalty: bool):
@@ -375,7 +364,7 @@ def solid_momentum(X, x, V, PL0, F, idx, geometry, parameters, *, penalty: bool)
       parameters: ``(solid_density, young_modulus, penalty_alpha)``.
     """
     scalars = [jax.numpy.asarray(q, X.dtype) for q in parameters]
-    return _within(
+    return _call(
         "sphjax_solid_momentum",
         X.shape,
         X.dtype,

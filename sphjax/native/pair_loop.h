@@ -269,6 +269,17 @@ void by_kernel(ffi::ThreadPool* pool, int kernel, const Setting<T>& s, const T* 
   sum_pairs<T, D>(pool, kernel, s, x, x, idx, n, n, k, out, term, static_cast<const Term*>(nullptr));
 }
 
+// a buffer's numbers as T (the handlers check its element type first)
+template <typename T>
+const T* data(const ffi::AnyBuffer& buffer) {
+  return reinterpret_cast<const T*>(buffer.untyped_data());
+}
+
+template <typename T>
+T* data(ffi::Result<ffi::AnyBuffer>& buffer) {
+  return reinterpret_cast<T*>(buffer->untyped_data());
+}
+
 template <typename T>
 Setting<T> setting(int dim, double h, double cutoff, double sigma, double lx, double ly,
                    double lz, int64_t periodic) {
@@ -288,3 +299,36 @@ Setting<T> setting(int dim, double h, double cutoff, double sigma, double lx, do
 }
 
 }  // namespace sphjax_native
+
+// The attributes every handler takes: the pair geometry (kernel, h, cutoff, the kernel's
+// normalisation, the box, its periodic axes) and whether the sum is between two systems.
+#define SPHJAX_SETTING_ATTRS                                                        \
+  int64_t kernel, double h, double cutoff, double sigma, double lx, double ly, double lz, \
+      int64_t periodic, bool cross
+
+#define SPHJAX_BIND_SETTING(binding)                                                    \
+  binding.Attr<int64_t>("kernel")                                                       \
+      .Attr<double>("h")                                                                \
+      .Attr<double>("cutoff")                                                           \
+      .Attr<double>("sigma")                                                            \
+      .Attr<double>("lx")                                                               \
+      .Attr<double>("ly")                                                               \
+      .Attr<double>("lz")                                                               \
+      .Attr<int64_t>("periodic")                                                        \
+      .Attr<bool>("cross")
+
+#define SPHJAX_SETTING_NAMES kernel, h, cutoff, sigma, lx, ly, lz, periodic, cross
+
+// the arguments of a handler: XLA's thread pool, n buffers, the neighbour list, m more
+#define SPHJAX_ARGS_1 .Arg<ffi::AnyBuffer>()
+#define SPHJAX_ARGS_2 SPHJAX_ARGS_1 SPHJAX_ARGS_1
+#define SPHJAX_ARGS_3 SPHJAX_ARGS_2 SPHJAX_ARGS_1
+#define SPHJAX_ARGS_4 SPHJAX_ARGS_2 SPHJAX_ARGS_2
+#define SPHJAX_ARGS_5 SPHJAX_ARGS_4 SPHJAX_ARGS_1
+#define SPHJAX_ARGS_6 SPHJAX_ARGS_3 SPHJAX_ARGS_3
+#define SPHJAX_ARGS_10 SPHJAX_ARGS_5 SPHJAX_ARGS_5
+#define SPHJAX_ARGS_0
+#define SPHJAX_BIND(before, after)                                                       \
+  SPHJAX_BIND_SETTING(ffi::Ffi::Bind().Ctx<ffi::ThreadPool>() SPHJAX_ARGS_##before       \
+                          .Arg<ffi::Buffer<ffi::S32>>() SPHJAX_ARGS_##after              \
+                          .Ret<ffi::AnyBuffer>())

@@ -289,16 +289,6 @@ void extrapolation(const Where& at, const Setting<T>& s, const Side<T>& a, const
 // ------------------------------------------------------------------ FFI handlers
 
 template <typename T>
-const T* data(const ffi::AnyBuffer& buffer) {
-  return reinterpret_cast<const T*>(buffer.untyped_data());
-}
-
-template <typename T>
-T* data(ffi::Result<ffi::AnyBuffer>& buffer) {
-  return reinterpret_cast<T*>(buffer->untyped_data());
-}
-
-template <typename T>
 const T* optional(const ffi::AnyBuffer* buffer) {
   return buffer == nullptr ? nullptr : data<T>(*buffer);
 }
@@ -318,22 +308,6 @@ ffi::Error check(const ffi::AnyBuffer& x, const ffi::AnyBuffer& x_columns,
   return ffi::Error::Success();
 }
 
-#define SPHJAX_SETTING_ATTRS                                                        \
-  int64_t kernel, double h, double cutoff, double sigma, double lx, double ly, double lz, \
-      int64_t periodic, bool cross
-
-#define SPHJAX_BIND_SETTING(binding)                                                    \
-  binding.Attr<int64_t>("kernel")                                                       \
-      .Attr<double>("h")                                                                \
-      .Attr<double>("cutoff")                                                           \
-      .Attr<double>("sigma")                                                            \
-      .Attr<double>("lx")                                                               \
-      .Attr<double>("ly")                                                               \
-      .Attr<double>("lz")                                                               \
-      .Attr<int64_t>("periodic")                                                        \
-      .Attr<bool>("cross")
-
-#define SPHJAX_SETTING_NAMES kernel, h, cutoff, sigma, lx, ly, lz, periodic, cross
 
 // One call: where it runs, the pair geometry, and the fields of its two sides as buffers
 // (a field a sum does not read: nullptr).
@@ -485,20 +459,6 @@ ffi::Error Extrapolation(ffi::ThreadPool pool, ffi::AnyBuffer x, ffi::AnyBuffer 
 }
 
 }  // namespace
-
-// the arguments of a handler: XLA's thread pool, n buffers, the neighbour list, m more
-#define SPHJAX_ARGS_1 .Arg<ffi::AnyBuffer>()
-#define SPHJAX_ARGS_2 SPHJAX_ARGS_1 SPHJAX_ARGS_1
-#define SPHJAX_ARGS_3 SPHJAX_ARGS_2 SPHJAX_ARGS_1
-#define SPHJAX_ARGS_4 SPHJAX_ARGS_2 SPHJAX_ARGS_2
-#define SPHJAX_ARGS_5 SPHJAX_ARGS_4 SPHJAX_ARGS_1
-#define SPHJAX_ARGS_6 SPHJAX_ARGS_3 SPHJAX_ARGS_3
-#define SPHJAX_ARGS_10 SPHJAX_ARGS_5 SPHJAX_ARGS_5
-#define SPHJAX_ARGS_0
-#define SPHJAX_BIND(before, after)                                                       \
-  SPHJAX_BIND_SETTING(ffi::Ffi::Bind().Ctx<ffi::ThreadPool>() SPHJAX_ARGS_##before       \
-                          .Arg<ffi::Buffer<ffi::S32>>() SPHJAX_ARGS_##after              \
-                          .Ret<ffi::AnyBuffer>())
 
 XLA_FFI_DEFINE_HANDLER_SYMBOL(SphjaxKernelSum, KernelSum, SPHJAX_BIND(4, 0));
 XLA_FFI_DEFINE_HANDLER_SYMBOL(SphjaxVelocityDivergence, VelocityDivergence, SPHJAX_BIND(6, 0));

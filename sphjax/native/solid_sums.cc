@@ -185,16 +185,6 @@ void solid_momentum(ffi::ThreadPool* pool, int kernel, const Setting<T>& s, cons
 
 // ------------------------------------------------------------------ FFI handlers
 
-template <typename T>
-const T* data(const ffi::AnyBuffer& buffer) {
-  return reinterpret_cast<const T*>(buffer.untyped_data());
-}
-
-template <typename T>
-T* data(ffi::Result<ffi::AnyBuffer>& buffer) {
-  return reinterpret_cast<T*>(buffer->untyped_data());
-}
-
 ffi::Error check(const ffi::AnyBuffer& X, const ffi::Buffer<ffi::S32>& idx) {
   auto dims = X.dimensions();
   if (dims.size() != 2 || (dims[1] != 2 && dims[1] != 3))
@@ -223,20 +213,6 @@ T scalar(const ffi::AnyBuffer& buffer) {
   return *data<T>(buffer);
 }
 
-#define SPHJAX_SOLID_SETTING_ATTRS                                                          \
-  int64_t kernel, double h, double cutoff, double sigma, double lx, double ly, double lz, \
-      int64_t periodic
-
-#define SPHJAX_SOLID_BIND_SETTING(binding) \
-  binding.Attr<int64_t>("kernel")          \
-      .Attr<double>("h")                   \
-      .Attr<double>("cutoff")              \
-      .Attr<double>("sigma")               \
-      .Attr<double>("lx")                  \
-      .Attr<double>("ly")                  \
-      .Attr<double>("lz")                  \
-      .Attr<int64_t>("periodic")
-
 struct DeformationBody {
   ffi::ThreadPool* pool;
   const ffi::AnyBuffer &X, &x, &V, &L0;
@@ -256,8 +232,9 @@ struct DeformationBody {
 
 ffi::Error SolidDeformation(ffi::ThreadPool pool, ffi::AnyBuffer X, ffi::AnyBuffer x,
                             ffi::AnyBuffer V, ffi::AnyBuffer L0, ffi::Buffer<ffi::S32> idx,
-                            ffi::Result<ffi::AnyBuffer> F, SPHJAX_SOLID_SETTING_ATTRS) {
+                            ffi::Result<ffi::AnyBuffer> F, SPHJAX_SETTING_ATTRS) {
   if (auto e = check(X, idx); e.failure()) return e;
+  if (cross) return ffi::Error::InvalidArgument("a solid's sums are within the solid");
   DeformationBody body{&pool, X,      x,     V,  L0, idx.typed_data(), X.dimensions()[0],
                        idx.dimensions()[1], F, kernel, h, cutoff, sigma, lx,
                        ly,    lz,     periodic};
@@ -287,9 +264,10 @@ ffi::Error SolidMomentum(ffi::ThreadPool pool, ffi::AnyBuffer X, ffi::AnyBuffer 
                          ffi::AnyBuffer V, ffi::AnyBuffer PL0, ffi::AnyBuffer F,
                          ffi::Buffer<ffi::S32> idx, ffi::AnyBuffer rho0,
                          ffi::AnyBuffer young_modulus, ffi::AnyBuffer alpha,
-                         ffi::Result<ffi::AnyBuffer> out, SPHJAX_SOLID_SETTING_ATTRS,
+                         ffi::Result<ffi::AnyBuffer> out, SPHJAX_SETTING_ATTRS,
                          bool penalty) {
   if (auto e = check(X, idx); e.failure()) return e;
+  if (cross) return ffi::Error::InvalidArgument("a solid's sums are within the solid");
   MomentumBody body{&pool,   X,      x,     V,     PL0, F,  rho0, young_modulus, alpha,
                     idx.typed_data(), X.dimensions()[0], idx.dimensions()[1], out, kernel, h,
                     cutoff,  sigma,  lx,    ly,    lz,  periodic, penalty};
@@ -298,27 +276,6 @@ ffi::Error SolidMomentum(ffi::ThreadPool pool, ffi::AnyBuffer X, ffi::AnyBuffer 
 
 }  // namespace
 
-XLA_FFI_DEFINE_HANDLER_SYMBOL(SphjaxSolidDeformation, SolidDeformation,
-                              SPHJAX_SOLID_BIND_SETTING(ffi::Ffi::Bind()
-                                                            .Ctx<ffi::ThreadPool>()
-                                                            .Arg<ffi::AnyBuffer>()
-                                                            .Arg<ffi::AnyBuffer>()
-                                                            .Arg<ffi::AnyBuffer>()
-                                                            .Arg<ffi::AnyBuffer>()
-                                                            .Arg<ffi::Buffer<ffi::S32>>()
-                                                            .Ret<ffi::AnyBuffer>()));
-
+XLA_FFI_DEFINE_HANDLER_SYMBOL(SphjaxSolidDeformation, SolidDeformation, SPHJAX_BIND(4, 0));
 XLA_FFI_DEFINE_HANDLER_SYMBOL(SphjaxSolidMomentum, SolidMomentum,
-                              SPHJAX_SOLID_BIND_SETTING(ffi::Ffi::Bind()
-                                                            .Ctx<ffi::ThreadPool>()
-                                                            .Arg<ffi::AnyBuffer>()
-                                                            .Arg<ffi::AnyBuffer>()
-                                                            .Arg<ffi::AnyBuffer>()
-                                                            .Arg<ffi::AnyBuffer>()
-                                                            .Arg<ffi::AnyBuffer>()
-                                                            .Arg<ffi::Buffer<ffi::S32>>()
-                                                            .Arg<ffi::AnyBuffer>()
-                                                            .Arg<ffi::AnyBuffer>()
-                                                            .Arg<ffi::AnyBuffer>()
-                                                            .Ret<ffi::AnyBuffer>())
-                                  .Attr<bool>("penalty"));
+                              SPHJAX_BIND(5, 3).Attr<bool>("penalty"));

@@ -105,8 +105,12 @@ class SolidSystem:
     #: the Params group it reads
     params_group = "solid"
 
-    #: its own pair sums have compiled loops (``Model.pair_loop="native"``)
-    native_pair_sums = True
+    @property
+    def native_pair_sums(self) -> bool:
+        """Whether ``Model.pair_loop="native"`` has a loop for its own sums that a run
+        uses: eq. 14 with the penalty force and the first-order correction (without the
+        penalty, XLA's sums over the stored reference geometry are faster)."""
+        return self.penalty is not None and self.gradient_correction == "first_order"
 
     def __post_init__(self):
         if not hasattr(self.material, "pk1"):
