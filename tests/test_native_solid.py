@@ -68,9 +68,17 @@ def jittered_block(dim, kernel, periodic):
     return model, state.replace(position=x), neighbors.reference[0]["L0"], pairs
 
 
+# every kernel once, two in each dimension (the suite's time: each case compiles anew)
+KERNEL_DIMS = [
+    (2, "cubic_spline"),
+    (2, "wendland_c2"),
+    (3, "quintic_spline"),
+    (3, "wendland_c4"),
+]
+
+
 @pytest.mark.parametrize("periodic", [False, True])
-@pytest.mark.parametrize("kernel", sorted(KERNELS))
-@pytest.mark.parametrize("dim", [2, 3])
+@pytest.mark.parametrize(("dim", "kernel"), KERNEL_DIMS)
 def test_native_solid_sums_equal_xla_to_round_off(dim, kernel, periodic):
     """``F`` (eq. 16) and eq. 14's pair terms with and without the penalty force, from
     the compiled loops (the reference geometry recomputed from ``X``) and from XLA's pair
