@@ -1,7 +1,8 @@
 """Test configuration: every test runs in float64 (gradient and conservation checks), and
 compiled programs are kept in a persistent cache shared by the test workers and every
 process they start (CLI runs, notebook kernels), so a program compiled once in a run is
-not compiled again."""
+not compiled again.  The tests compile with XLA:CPU's loop emitters instead of its newer
+fusion emitters (see TEST_XLA_FLAGS below)."""
 
 import collections
 import gc
@@ -9,10 +10,24 @@ import json
 import os
 import time
 import warnings
+from importlib.metadata import version
 from pathlib import Path
 
-import jax
-import pytest
+# XLA:CPU compiles a program about a third faster with its loop emitters than with its
+# fusion emitters (the default since jaxlib 0.10), and the compiled steps run 4-14 %
+# slower (docs/performance.md, "The test suite").  Three quarters of the suite's time is
+# compiling, so the tests take the faster compiler; users keep the default.  The results
+# are the same to round-off (tests/test_compiler_flags.py runs a simulation both ways).
+# Set before JAX creates its CPU backend; the variable reaches the processes the tests
+# start (CLI runs, notebook kernels).  A flag the user set is left alone.
+TEST_XLA_FLAGS = ("--xla_cpu_use_fusion_emitters=false",)
+if tuple(int(part) for part in version("jaxlib").split(".")[:2]) >= (0, 10):
+    for flag in TEST_XLA_FLAGS:
+        if flag.split("=")[0] not in os.environ.get("XLA_FLAGS", ""):
+            os.environ["XLA_FLAGS"] = f"{os.environ.get('XLA_FLAGS', '')} {flag}".strip()
+
+import jax  # noqa: E402  after XLA_FLAGS
+import pytest  # noqa: E402
 
 jax.config.update("jax_enable_x64", True)
 
