@@ -1,8 +1,9 @@
 """The pair loops that benchmarks/pair_loop_ceiling.py and benchmarks/pair_loop_ffi.py time
 against the XLA step do the step's work: from the same lattice start, after 40 steps, the
-C loop's kinetic energy (each pair once or from both sides) and the FFI handler's
-positions and velocities are sphjax's to float32 round-off (otherwise their timings would
-not be of the same computation)."""
+C loop's kinetic energy (each pair once or from both sides, or cell-blocked: one and two
+threads, cells of the support and of half of it, four particles at once) and the FFI
+handler's positions and velocities are sphjax's to float32 round-off (otherwise their
+timings would not be of the same computation)."""
 
 from __future__ import annotations
 
@@ -49,18 +50,27 @@ def test_the_c_pair_loop_computes_the_sphjax_step(tmp_path):
     spec.loader.exec_module(bench)
     binary = built(lambda: bench.compile_loop("gcc", str(tmp_path)))
     n, steps = 40, 40
-    both = bench.run_loop(binary, n, steps, threads=1, half=False)
-    once = bench.run_loop(binary, n, steps, threads=1, half=True)
+    both = bench.run_loop(binary, n, steps, threads=1, mode="both")
+    once = bench.run_loop(binary, n, steps, threads=1, mode="once")
+    cells = [
+        bench.run_loop(binary, n, steps, threads, mode="cells", split=split)
+        for threads in (1, 2)
+        for split in (1, 2)
+    ]
+    cells.append(bench.run_loop(binary, n, steps, threads=1, mode="cells_by_4"))
     case = lattice_taylor_green(n)
     traj = sphjax.simulate(case, n_steps=steps, save_every=steps, dt=0.25 / n / 11.0)
     velocity = np.asarray(traj.states.velocity[-1], dtype=np.float64)
     mass = np.asarray(traj.states.mass[-1], dtype=np.float64)
     kinetic = 0.5 * np.sum(mass[:, None] * velocity**2)
     assert 0.23 < kinetic < 0.25  # it decayed from 1/4, as the vortex does
-    for row in (both, once):
+    for row in (both, once, *cells):
         assert abs(row["kinetic_energy"] / kinetic - 1) < 1e-5
     # quintic spline, support 3 h = 3 dx: about pi 3^2 = 28 neighbours on the lattice
     assert 26 <= both["neighbours_inside"] <= 30
+    # each pair once (the cell-blocked loop too): the same pairs, less the particle itself
+    for row in (once, *cells):
+        assert row["neighbours_inside"] == pytest.approx(both["neighbours_inside"] - 1)
 
 
 @pytest.mark.skipif(shutil.which("g++") is None, reason="needs a C++ compiler")
