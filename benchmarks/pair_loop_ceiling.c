@@ -59,7 +59,8 @@ static inline real shape_derivative(real q) {
  * the loop over a run's particles b is unit-stride, rounded up to whole vectors of LANES
  * floats, with the pairs outside the support (and the lanes past the run) masked: no
  * neighbour list, no gather.  Each pair is visited once (in a's own cell only b > a) and
- * its terms are added to both particles, b's by a masked store into the run. */
+ * its terms are added to both particles: b's by a masked store into the run, a's to one
+ * vector of partial sums kept over all its runs and added up once. */
 enum { LANES = 8 };    /* floats per 256-bit (AVX2) vector; the arrays are padded by as many */
 enum { MAX_SPLIT = 4 }; /* cells per support length, at most */
 
@@ -104,62 +105,69 @@ static int half_shell(const Fluid *f, int row, int column, Run *runs) {
     return count;
 }
 
-/* eq. 5's kernel sum for a against one run: sum_b f(|r_ab| / h), returned for a and
- * added to rho[b] for each b in the support; counts[0] counts the pairs, counts[1] the
- * distances evaluated (the lanes) */
-static real kernel_sum(const Fluid *f, int a, Run run, long long *counts) {
+/* eq. 5's kernel sum for a against one run: sum_b f(|r_ab| / h), added to a's LANES
+ * partial sums sum_lanes[] (one vector, summed once a has met all its runs) and to rho[b]
+ * for each b in the support; counts[0] counts the pairs, counts[1] the distances
+ * evaluated (the lanes) */
+static void kernel_sum(const Fluid *f, int a, Run run, long long *counts,
+                       real *restrict sum_lanes) {
     const real *restrict x = f->x, *restrict y = f->y;
     real *restrict rho = f->rho;
-    real xa = x[a] - run.shift_x, ya = y[a] - run.shift_y, sum = 0;
+    real xa = x[a] - run.shift_x, ya = y[a] - run.shift_y;
     real support2 = f->support2, inverse_h = 1 / f->h;
     int first = run.own ? a + 1 : run.lo, hi = run.hi, count = 0;
     int end = run.lo + (hi - run.lo + LANES - 1) / LANES * LANES; /* whole vectors */
-#pragma omp simd simdlen(LANES) reduction(+ : sum, count)
-    for (int b = run.lo; b < end; b++) {
-        real rx = xa - x[b], ry = ya - y[b], r2 = rx * rx + ry * ry;
-        int pair = b >= first && b < hi && r2 < support2;
-        real w = pair ? shape(sqrtf(r2) * inverse_h) : 0;
-        sum += w;
-        count += pair;
-        if (pair) rho[b] += w;
+    for (int b0 = run.lo; b0 < end; b0 += LANES) { /* one vector of particles b */
+#pragma omp simd simdlen(LANES) reduction(+ : count)
+        for (int k = 0; k < LANES; k++) {
+            int b = b0 + k;
+            real rx = xa - x[b], ry = ya - y[b], r2 = rx * rx + ry * ry;
+            int pair = b >= first && b < hi && r2 < support2;
+            real w = pair ? shape(sqrtf(r2) * inverse_h) : 0;
+            sum_lanes[k] += w;
+            count += pair;
+            if (pair) rho[b] += w;
+        }
     }
     counts[0] += count;
     counts[1] += end - run.lo;
-    return sum;
 }
 
 /* eq. 10 with Morris' viscosity for a against one run: the pair's acceleration of a,
  * -m (p_a / rho_a^2 + p_b / rho_b^2) grad W + m nu (1/rho_a + 1/rho_b) r.grad W /
- * (r^2 + eta^2) (v_a - v_b), added to (gx, gy) and subtracted from b's (equal masses) */
-static void momentum_sum(const Fluid *f, int a, Run run, real *gx, real *gy) {
+ * (r^2 + eta^2) (v_a - v_b), added to a's partial sums gx[], gy[] (as kernel_sum's) and
+ * subtracted from b's (equal masses) */
+static void momentum_sum(const Fluid *f, int a, Run run, real *restrict gx,
+                         real *restrict gy) {
     const real *restrict x = f->x, *restrict y = f->y, *restrict u = f->u, *restrict v = f->v;
     const real *restrict coef = f->coef, *restrict inv = f->inv;
     real *restrict ax = f->ax, *restrict ay = f->ay;
     real support2 = f->support2, inverse_h = 1 / f->h, eta2 = f->eta2, m = f->m;
     real xa = x[a] - run.shift_x, ya = y[a] - run.shift_y;
-    real ua = u[a], va = v[a], coef_a = coef[a], inv_a = inv[a], sx = 0, sy = 0;
+    real ua = u[a], va = v[a], coef_a = coef[a], inv_a = inv[a];
     real gradient_scale = f->sigma / f->h, viscous_scale = f->m * f->nu;
     int first = run.own ? a + 1 : run.lo, hi = run.hi;
     int end = run.lo + (hi - run.lo + LANES - 1) / LANES * LANES;
-#pragma omp simd simdlen(LANES) reduction(+ : sx, sy)
-    for (int b = run.lo; b < end; b++) {
-        real rx = xa - x[b], ry = ya - y[b], r2 = rx * rx + ry * ry;
-        int pair = b >= first && b < hi && r2 < support2;
-        real r = sqrtf(r2), dw = shape_derivative(r * inverse_h);
-        real grad = pair && r > 0 ? gradient_scale * dw / r : 0; /* grad W = grad r_ab */
-        real pressure = -m * (coef_a + coef[b]);
-        real viscous = viscous_scale * (inv_a + inv[b]) * (r2 * grad) / (r2 + eta2);
-        real fx = pressure * grad * rx + viscous * (ua - u[b]);
-        real fy = pressure * grad * ry + viscous * (va - v[b]);
-        sx += fx;
-        sy += fy;
-        if (pair) {
-            ax[b] -= fx;
-            ay[b] -= fy;
+    for (int b0 = run.lo; b0 < end; b0 += LANES) { /* one vector of particles b */
+#pragma omp simd simdlen(LANES)
+        for (int k = 0; k < LANES; k++) {
+            int b = b0 + k;
+            real rx = xa - x[b], ry = ya - y[b], r2 = rx * rx + ry * ry;
+            int pair = b >= first && b < hi && r2 < support2;
+            real r = sqrtf(r2), dw = shape_derivative(r * inverse_h);
+            real grad = pair && r > 0 ? gradient_scale * dw / r : 0; /* grad W = grad r_ab */
+            real pressure = -m * (coef_a + coef[b]);
+            real viscous = viscous_scale * (inv_a + inv[b]) * (r2 * grad) / (r2 + eta2);
+            real fx = pressure * grad * rx + viscous * (ua - u[b]);
+            real fy = pressure * grad * ry + viscous * (va - v[b]);
+            gx[k] += fx;
+            gy[k] += fy;
+            if (pair) {
+                ax[b] -= fx;
+                ay[b] -= fy;
+            }
         }
     }
-    *gx += sx;
-    *gy += sy;
 }
 
 /* ---- the same with BLOCK = 4 particles a at a time (MODE 3) ----
@@ -278,8 +286,9 @@ static void kernel_sum_rows(const Fluid *f, int row0, int row1, long long *count
             int c = row * f->nc + column, count = half_shell(f, row, column, runs);
             if (!f->block) {
                 for (int a = f->start[c]; a < f->start[c + 1]; a++) {
-                    real sum = 0;
-                    for (int k = 0; k < count; k++) sum += kernel_sum(f, a, runs[k], counts);
+                    real sum_lanes[LANES] = {0}, sum = 0;
+                    for (int k = 0; k < count; k++) kernel_sum(f, a, runs[k], counts, sum_lanes);
+                    for (int k = 0; k < LANES; k++) sum += sum_lanes[k];
                     f->rho[a] += sum;
                 }
                 continue;
@@ -301,10 +310,12 @@ static void momentum_sum_rows(const Fluid *f, int row0, int row1, long long *cou
             int c = row * f->nc + column, count = half_shell(f, row, column, runs);
             if (!f->block) {
                 for (int a = f->start[c]; a < f->start[c + 1]; a++) {
-                    real gx = 0, gy = 0;
-                    for (int k = 0; k < count; k++) momentum_sum(f, a, runs[k], &gx, &gy);
-                    f->ax[a] += gx;
-                    f->ay[a] += gy;
+                    real gx[LANES] = {0}, gy[LANES] = {0};
+                    for (int k = 0; k < count; k++) momentum_sum(f, a, runs[k], gx, gy);
+                    for (int k = 0; k < LANES; k++) {
+                        f->ax[a] += gx[k];
+                        f->ay[a] += gy[k];
+                    }
                 }
                 continue;
             }
