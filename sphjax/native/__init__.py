@@ -20,14 +20,16 @@ from the row's side, rows shared between threads, which spares XLA's gathers of 
 neighbours' fields and its per-pair temporaries.
 
 ``solid_sums.cc`` has the two pair sums of an elastic solid (total-Lagrangian SPH) over
-its reference neighbours, the pair geometry recomputed from the reference positions:
+its reference neighbours, row by row over weights per slot computed once per run from the
+stored reference kernel gradients:
 
-* ``solid_deformation``: the deformation gradient ``F`` (eq. 16);
-* ``solid_momentum``: eq. 14's elastic pair forces with Ganzenmüller's penalty force.
+* ``deformation_by_rows``: the deformation gradient ``F`` (eq. 16);
+* ``elastic_by_rows``: eq. 14's elastic pair forces;
 
-A run uses the second with the penalty force only: XLA's sums over the reference geometry
-stored once per run are faster than the first, and than the second without the penalty
-(docs/performance.md).
+and each pair once, the pair geometry recomputed from the reference positions:
+
+* ``solid_deformation``: eq. 16 (slower than XLA's sum; not used by a run);
+* ``solid_momentum``: eq. 14 with Ganzenmüller's penalty force, which a run uses with it.
 
 ``cell_list.cc`` rebuilds the neighbour search's list (:func:`cell_list_rebuild`, used by
 :class:`sphjax.neighbors.NeighborSearch` when ``SearchGeometry.native``): a counting sort
