@@ -237,24 +237,25 @@ void elastic_by_rows(ffi::ThreadPool* pool, const T* PL0, const T* weight, const
                      int64_t n, int64_t k, T rho0, T* out) {
   const int64_t threads = thread_count(pool, n);
   const T inverse_rho0 = T(1) / rho0;
-  auto rows = [&](int64_t t) SPHJAX_FLATTEN {
+  auto rows = [&](int64_t t) SPHJAX_FLATTEN SPHJAX_SCALAR {
     const int64_t lo = n * t / threads, hi = n * (t + 1) / threads;
     for (int64_t a = lo; a < hi; a++) {
       const int32_t* row = idx + a * k;
       const T* e = weight + a * k * D;
-      T G[D] = {}, H[D] = {};
+      // H_i's terms by m: chains of additions D times shorter
+      T G[D] = {}, H[D * D] = {};
       for (int64_t j = 0; j < k; j++) {
         const int64_t b = row[j] < n ? row[j] : a;  // a free slot: e = 0
         const T* Pb = PL0 + b * D * D;
         for (int m = 0; m < D; m++) {
           G[m] += e[j * D + m];
-          for (int i = 0; i < D; i++) H[i] += Pb[i * D + m] * e[j * D + m];
+          for (int i = 0; i < D; i++) H[i * D + m] += Pb[i * D + m] * e[j * D + m];
         }
       }
       const T* Pa = PL0 + a * D * D;
       for (int i = 0; i < D; i++) {
-        T sum = H[i];
-        for (int m = 0; m < D; m++) sum += Pa[i * D + m] * G[m];
+        T sum = T(0);
+        for (int m = 0; m < D; m++) sum += H[i * D + m] + Pa[i * D + m] * G[m];
         out[a * D + i] = sum * inverse_rho0;
       }
     }
