@@ -219,12 +219,14 @@ def test_what_the_native_loops_cannot_do_is_refused_in_one_line(monkeypatch):
         ValueError, match=r"a fluid and of an elastic solid only .* use pair_loop='xla'"
     ):
         dataclasses.replace(walls, pair_loop="native")
-    # a solid without the penalty force: no loop a run would use (its sums stay XLA's)
+    # a solid with the second-order correction: no loop (its sums stay XLA's)
     plate = sphjax.cases.oscillating_plate(n=6)
-    with pytest.raises(ValueError, match=r"with its penalty force .* use pair_loop='xla'"):
-        dataclasses.replace(plate.model, pair_loop="native")
-    penalised = sphjax.cases.oscillating_plate(n=6, penalty_alpha=0.1)
-    assert dataclasses.replace(penalised.model, pair_loop="native").pair_loop == "native"
+    second_order = plate.model.systems[0].replace(gradient_correction="second_order")
+    with pytest.raises(ValueError, match=r"first-order correction\) .* use pair_loop='xla'"):
+        dataclasses.replace(plate.model, systems=(second_order,), pair_loop="native")
+    for options in ({}, {"penalty_alpha": 0.1}):
+        solid = sphjax.cases.oscillating_plate(n=6, **options).model
+        assert dataclasses.replace(solid, pair_loop="native").pair_loop == "native"
 
     @dataclasses.dataclass(frozen=True)
     class Gaussian(QuinticSpline):
@@ -250,10 +252,12 @@ def test_what_the_native_loops_cannot_do_is_refused_in_one_line(monkeypatch):
     "case",
     [
         ["taylor_green", "--n", "8", "--t-end", "0.011"],
-        # an elastic solid's loop (its momentum with the penalty force)
+        # an elastic solid's loops (eq. 16, eq. 14 row by row over the stored weights)
+        ["oscillating_plate", "--n", "4", "--t-end", "0.001"],
+        # eq. 14 with the penalty force, each pair once
         ["oscillating_plate", "--n", "4", "--t-end", "0.001", "--case-arg", "penalty_alpha=0.1"],
     ],
-    ids=["taylor_green", "oscillating_plate"],
+    ids=["taylor_green", "oscillating_plate", "oscillating_plate_penalty"],
 )
 def test_sphjax_run_with_native_loops_writes_the_xla_runs_frames(tmp_path, case):
     """``sphjax run ... --pair-loop native`` (float64) writes the frames of the run

@@ -1,6 +1,7 @@
 """``Model.pair_loop="native"`` for an elastic solid: the compiled loops of the
-deformation gradient (eq. 16) and of the momentum equation with Ganzenmüller's penalty
-force (eq. 14; ``sphjax/native/solid_sums.cc``) give XLA's pair sums to round-off, for
+deformation gradient (eq. 16) and of the momentum equation (eq. 14; ``sphjax/native/
+solid_sums.cc``), row by row over the reference kernel gradients stored once per run and,
+with Ganzenmüller's penalty force, each pair once, give XLA's pair sums to round-off, for
 every kernel, in 2D and 3D, across a periodic axis; runs follow XLA's; derivatives are
 XLA's."""
 
@@ -81,16 +82,19 @@ KERNEL_DIMS = [
 @pytest.mark.parametrize(("dim", "kernel"), KERNEL_DIMS)
 def test_native_solid_sums_equal_xla_to_round_off(dim, kernel, periodic):
     """``F`` (eq. 16) and eq. 14's pair terms with and without the penalty force, from
-    the compiled loops (the reference geometry recomputed from ``X``) and from XLA's pair
-    sums (the stored geometry): within 1e-12 of each other, relative to the largest
-    entry (float64)."""
+    the compiled loops (each pair once, the reference geometry recomputed from ``X``; row
+    by row over the stored kernel gradients) and from XLA's pair sums (the stored
+    geometry): within 1e-12 of each other, relative to the largest entry (float64)."""
     model, state, L0, pairs = jittered_block(dim, kernel, periodic)
     geometry = pair_sums.Geometry.of(model)
     X, x, V = state.reference_position, state.position, state.volume
+    grad_w = pairs.geometry.grad_w
     deformation = functools.partial(solid_system._deformation_summand, domain=model.domain)
     F = pair_sums.pair_sum(deformation, {"x": X, "xc": x, "V": V, "L0": L0}, None, pairs, geometry)
     assert relative(F, jnp.broadcast_to(jnp.eye(dim), F.shape)) > 1e-2  # deformed
     assert relative(native.solid_deformation(X, x, V, L0, pairs.idx, geometry), F) < 1e-12
+    by_rows = native.deformation_by_rows(x, V, L0, grad_w, pairs.idx, model.domain)
+    assert relative(by_rows, F) < 1e-12
 
     PL0 = jnp.asarray(np.random.default_rng(1).standard_normal(F.shape)) * 1e4
     shared = interactions.SolidPairParameters(*map(jnp.asarray, (1000.0, 2.0e6, 0.1)))
@@ -105,6 +109,9 @@ def test_native_solid_sums_equal_xla_to_round_off(dim, kernel, periodic):
         )
         loop = native.solid_momentum(X, x, V, PL0, F, pairs.idx, geometry, shared, penalty=penalty)
         assert relative(loop, xla["a"]) < 1e-12, penalty
+        if not penalty:
+            by_rows = native.elastic_by_rows(V, PL0, grad_w, pairs.idx, shared.solid_density)
+            assert relative(by_rows, xla["a"]) < 1e-12
         accelerations.append(xla["a"])
     assert relative(accelerations[1], accelerations[0]) > 1e-2  # the penalty force counts
 
@@ -125,26 +132,36 @@ def compiled_loops(case) -> set:
     return {target for target in native.TARGETS if target in program}
 
 
-def plate(**options):
-    """The oscillating plate at 4 particles through its thickness (float64), with
-    Ganzenmüller's penalty force: both solid sums and their penalty term in every step."""
-    return sphjax.cases.oscillating_plate(n=4, penalty_alpha=0.1, **options)
+def plate(penalty_alpha=0.1, **options):
+    """The oscillating plate at 4 particles through its thickness (float64), by default
+    with Ganzenmüller's penalty force (``penalty_alpha=None``: without)."""
+    if penalty_alpha is not None:
+        options["penalty_alpha"] = penalty_alpha
+    return sphjax.cases.oscillating_plate(n=4, **options)
+
+
+#: the plate with the penalty force (eq. 14 each pair once) and without (row by row)
+PENALTIES = pytest.mark.parametrize("penalty_alpha", [0.1, None], ids=["penalty", "plain"])
 
 
 def test_which_solid_sums_are_compiled():
-    """The momentum with the penalty force goes through its compiled loop; the
-    deformation gradient stays XLA's sum over the stored reference geometry (faster
-    there), and a plate without the penalty force, which would compile nothing, is
-    refused."""
-    assert compiled_loops(natively(plate())) == {"sphjax_solid_momentum"}
-    with pytest.raises(ValueError, match=r"with its penalty force .* use pair_loop='xla'"):
-        natively(sphjax.cases.oscillating_plate(n=4))
+    """The deformation gradient goes row by row over the stored kernel gradients; the
+    momentum too without the penalty force, with it each pair once."""
+    assert compiled_loops(natively(plate())) == {
+        "sphjax_deformation_by_rows",
+        "sphjax_solid_momentum",
+    }
+    assert compiled_loops(natively(plate(None))) == {
+        "sphjax_deformation_by_rows",
+        "sphjax_elastic_by_rows",
+    }
 
 
-def test_a_native_plate_run_follows_the_xla_run():
+@PENALTIES
+def test_a_native_plate_run_follows_the_xla_run(penalty_alpha):
     """60 steps of the plate: positions and velocities within 1e-10 of XLA's run,
     relative to their largest entries (float64); the plate has moved."""
-    case = plate()
+    case = plate(penalty_alpha)
     xla = sphjax.simulate(case, n_steps=60).final
     loops = sphjax.simulate(natively(case), n_steps=60).final
     assert relative(xla.position, case.state.position) > 1e-4
@@ -152,11 +169,12 @@ def test_a_native_plate_run_follows_the_xla_run():
     assert relative(loops.velocity, xla.velocity) < 1e-10
 
 
-def test_derivatives_through_a_native_plate_run_are_xlas():
+@PENALTIES
+def test_derivatives_through_a_native_plate_run_are_xlas(penalty_alpha):
     """Reverse mode through 10 steps of the plate (checkpointed) with respect to Young's
     modulus, the initial positions and the reference positions (from which the
     reference geometry and ``L0`` are computed) equals XLA's to 1e-10."""
-    case = plate()
+    case = plate(penalty_alpha)
 
     def loss(case, young_modulus, position, reference):
         params = case.params.replace(young_modulus=young_modulus)
@@ -220,3 +238,20 @@ def test_a_native_fsi_run_follows_the_xla_run():
     loops = sphjax.simulate(natively(case), n_steps=40).final
     assert relative(loops.position, xla.position) < 1e-10
     assert relative(loops.velocity, xla.velocity) < 1e-10
+
+
+def test_a_native_plate_run_in_float32_agrees_with_xla_to_its_round_off():
+    """The plate without the penalty force in float32 (both sums row by row): positions
+    within 1e-5 of XLA's after 60 steps, relative to their largest entry (a few ulps of
+    float32 per step, summed in another order)."""
+    previous = jax.config.jax_enable_x64
+    jax.config.update("jax_enable_x64", False)
+    try:
+        case = plate(None)
+        xla = sphjax.simulate(case, n_steps=60).final
+        loops = sphjax.simulate(natively(case), n_steps=60).final
+        assert loops.position.dtype == jnp.float32
+        assert relative(xla.position, case.state.position) > 1e-4
+        assert relative(loops.position, xla.position) < 1e-5
+    finally:
+        jax.config.update("jax_enable_x64", previous)

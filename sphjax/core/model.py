@@ -156,8 +156,8 @@ class Model:
         if not any(getattr(s, "native_pair_sums", False) for s in self.systems):
             raise ValueError(
                 "Model.pair_loop='native' has loops for the own pair sums of a fluid and "
-                "of an elastic solid only (the solid's with its penalty force and the "
-                "first-order correction) and this model has neither; use pair_loop='xla'"
+                "of an elastic solid only (the solid's with the first-order correction) "
+                "and this model has neither; use pair_loop='xla'"
             )
         if type(self.kernel) not in KERNELS.values():
             raise ValueError(

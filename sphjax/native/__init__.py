@@ -20,14 +20,16 @@ from the row's side, rows shared between threads, which spares XLA's gathers of 
 neighbours' fields and its per-pair temporaries.
 
 ``solid_sums.cc`` has the two pair sums of an elastic solid (total-Lagrangian SPH) over
-its reference neighbours, the pair geometry recomputed from the reference positions:
+its reference neighbours, row by row over weights per slot computed once per run from the
+stored reference kernel gradients:
 
-* ``solid_deformation``: the deformation gradient ``F`` (eq. 16);
-* ``solid_momentum``: eq. 14's elastic pair forces with Ganzenmüller's penalty force.
+* ``deformation_by_rows``: the deformation gradient ``F`` (eq. 16);
+* ``elastic_by_rows``: eq. 14's elastic pair forces;
 
-A run uses the second with the penalty force only: XLA's sums over the reference geometry
-stored once per run are faster than the first, and than the second without the penalty
-(docs/performance.md).
+and each pair once, the pair geometry recomputed from the reference positions:
+
+* ``solid_deformation``: eq. 16 (slower than XLA's sum; not used by a run);
+* ``solid_momentum``: eq. 14 with Ganzenmüller's penalty force, which a run uses with it.
 
 ``cell_list.cc`` rebuilds the neighbour search's list (:func:`cell_list_rebuild`, used by
 :class:`sphjax.neighbors.NeighborSearch` when ``SearchGeometry.native``): a counting sort
@@ -90,6 +92,8 @@ TARGETS = {
     "sphjax_extrapolation": "SphjaxExtrapolation",
     "sphjax_solid_deformation": "SphjaxSolidDeformation",
     "sphjax_solid_momentum": "SphjaxSolidMomentum",
+    "sphjax_deformation_by_rows": "SphjaxDeformationByRows",
+    "sphjax_elastic_by_rows": "SphjaxElasticByRows",
     "sphjax_cell_list_rebuild": "SphjaxCellListRebuild",
 }
 #: the kernels ``pair_sums.cc`` knows, by name (its ids)
@@ -378,6 +382,68 @@ def solid_momentum(X, x, V, PL0, F, idx, geometry, parameters, *, penalty: bool)
         *scalars,
         penalty=bool(penalty),
     )
+
+
+def _box(domain, dim: int) -> dict:
+    """The box as the stored-weight loops' attributes (lengths, periodic axes as bits)."""
+    size = list(domain.size) + [1.0] * (3 - dim)
+    periodic = sum(1 << i for i, p in enumerate(domain.periodic) if p)
+    return dict(
+        lx=np.float64(size[0]),
+        ly=np.float64(size[1]),
+        lz=np.float64(size[2]),
+        periodic=np.int64(periodic),
+    )
+
+
+def _neighbour_volumes(V, idx):
+    """``V0_b`` per slot of ``idx`` (``[N, K]``; 0 in the free slots)."""
+    n = V.shape[0]
+    return jax.numpy.where(idx < n, V[jax.numpy.minimum(idx, n - 1)], 0.0)
+
+
+def deformation_by_rows(x, V, L0, grad_w, idx, domain):
+    """The deformation gradient ``F_a = -sum_b V0_b x_ab (L0_a grad0_a W(X_ab))^T``
+    (eq. 16), ``[N, d, d]``, row by row over the reference list ``idx``.
+
+    The weights per slot ``c_ab = V0_b L0_a grad0_a W(X_ab)`` depend on the reference
+    configuration only: inside a run's loop of steps XLA computes them once, before it.
+
+    Args:
+      x: ``[N, d]`` current positions (``x_ab``, minimum image on ``domain``'s periodic
+        axes).
+      V: ``[N]`` reference volumes ``V0``.
+      L0: ``[N, d, d]`` the correction matrices (eq. 15).
+      grad_w: ``[N, K, d]`` ``grad0_a W(X_ab)`` per slot of ``idx`` (0 in free slots).
+      idx: ``[N, K]`` the reference list (free slots hold ``N`` or more).
+      domain: the box (:class:`sphjax.core.space.Domain`).
+    """
+    register()
+    n, d = x.shape
+    weights = _neighbour_volumes(V, idx)[..., None] * jax.numpy.einsum("aij,akj->aki", L0, grad_w)
+    call = jax.ffi.ffi_call(
+        "sphjax_deformation_by_rows",
+        jax.ShapeDtypeStruct((n, d, d), x.dtype),
+        vmap_method="sequential",
+    )
+    return call(x, weights.astype(x.dtype), _list(idx), **_box(domain, d))
+
+
+def elastic_by_rows(V, PL0, grad_w, idx, solid_density):
+    """Eq. 14's elastic pair terms per unit of the rows' own mass, ``[N, d]``:
+    ``sum_b V0_b [(P L0)_a + (P L0)_b] grad0_a W(X_ab) / rho0``, row by row over the
+    reference list ``idx``; ``PL0``: ``[N, d, d]`` ``P_a L0_a``; ``grad_w``: ``[N, K, d]``
+    ``grad0_a W(X_ab)`` per slot.  The weights per slot ``V0_b grad0_a W(X_ab)`` depend
+    on the reference configuration only (computed once before a run's loop of steps)."""
+    register()
+    weights = _neighbour_volumes(V, idx)[..., None] * grad_w
+    call = jax.ffi.ffi_call(
+        "sphjax_elastic_by_rows",
+        jax.ShapeDtypeStruct(grad_w.shape[:1] + grad_w.shape[2:], grad_w.dtype),
+        vmap_method="sequential",
+    )
+    rho0 = jax.numpy.asarray(solid_density, grad_w.dtype)
+    return call(PL0, weights.astype(grad_w.dtype), _list(idx), rho0)
 
 
 def cell_list_rebuild(x, width: int, *, box, cell_size, cells, radius2: float, capacity=None):

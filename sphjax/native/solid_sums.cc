@@ -183,6 +183,86 @@ void solid_momentum(ffi::ThreadPool* pool, int kernel, const Setting<T>& s, cons
   }
 }
 
+// ------------------------------------------------ row by row over stored weights
+//
+// The same two sums over the solid's fixed reference list row by row (each pair seen
+// from both sides, as XLA sums it), reading weights per slot computed once per run
+// ([N, K, D]; 0 in the free slots, which index N) instead of recomputing the reference
+// geometry: per slot a few scalar loads and products, no gathering into buffers.  (The
+// slots as one vectorised loop read the neighbours' fields with the CPU's gather
+// instructions: slower here.)  The rows are shared between threads.
+//
+//   deformation_by_rows   F_a = -sum_b x_ab c_ab^T,   c_ab = V0_b L0_a grad0_a W(X_ab)     (eq. 16)
+//   elastic_by_rows       sum_b [(P L0)_a + (P L0)_b] e_ab / rho0
+//                         = [(P L0)_a sum_b e_ab + sum_b (P L0)_b e_ab] / rho0,
+//                         e_ab = V0_b grad0_a W(X_ab)                                    (eq. 14)
+
+// GCC vectorises a row's loop over its slots with gather instructions, about twice slower
+// here than the scalar loop
+#define SPHJAX_SCALAR __attribute__((optimize("no-tree-loop-vectorize")))
+
+// x_a - x_b on axis i, the minimum image when Periodic
+template <typename T, int D, bool Periodic>
+inline T separation(const Box<T, D>& box, T xa, T xb, int i) {
+  return Periodic ? box.image(xa - xb, i) : xa - xb;
+}
+
+template <typename T, int D, bool Periodic>
+void deformation_by_rows(ffi::ThreadPool* pool, const Box<T, D>& box, const T* x,
+                         const T* weight, const int32_t* idx, int64_t n, int64_t k, T* F) {
+  const int64_t threads = thread_count(pool, n);
+  auto rows = [&](int64_t t) SPHJAX_FLATTEN SPHJAX_SCALAR {
+    const int64_t lo = n * t / threads, hi = n * (t + 1) / threads;
+    for (int64_t a = lo; a < hi; a++) {
+      const int32_t* row = idx + a * k;
+      const T* c = weight + a * k * D;
+      T xa[D];
+      for (int i = 0; i < D; i++) xa[i] = x[a * D + i];
+      T S[D * D] = {};
+      for (int64_t j = 0; j < k; j++) {
+        const int64_t b = row[j] < n ? row[j] : a;  // a free slot: x_ab = 0, c = 0
+        for (int i = 0; i < D; i++) {
+          const T dx = separation<T, D, Periodic>(box, xa[i], x[b * D + i], i);
+          for (int m = 0; m < D; m++) S[i * D + m] -= dx * c[j * D + m];
+        }
+      }
+      for (int i = 0; i < D * D; i++) F[a * D * D + i] = S[i];
+    }
+  };
+  in_parallel(pool, threads, rows);
+}
+
+template <typename T, int D>
+void elastic_by_rows(ffi::ThreadPool* pool, const T* PL0, const T* weight, const int32_t* idx,
+                     int64_t n, int64_t k, T rho0, T* out) {
+  const int64_t threads = thread_count(pool, n);
+  const T inverse_rho0 = T(1) / rho0;
+  auto rows = [&](int64_t t) SPHJAX_FLATTEN SPHJAX_SCALAR {
+    const int64_t lo = n * t / threads, hi = n * (t + 1) / threads;
+    for (int64_t a = lo; a < hi; a++) {
+      const int32_t* row = idx + a * k;
+      const T* e = weight + a * k * D;
+      // H_i's terms by m: chains of additions D times shorter
+      T G[D] = {}, H[D * D] = {};
+      for (int64_t j = 0; j < k; j++) {
+        const int64_t b = row[j] < n ? row[j] : a;  // a free slot: e = 0
+        const T* Pb = PL0 + b * D * D;
+        for (int m = 0; m < D; m++) {
+          G[m] += e[j * D + m];
+          for (int i = 0; i < D; i++) H[i * D + m] += Pb[i * D + m] * e[j * D + m];
+        }
+      }
+      const T* Pa = PL0 + a * D * D;
+      for (int i = 0; i < D; i++) {
+        T sum = T(0);
+        for (int m = 0; m < D; m++) sum += H[i * D + m] + Pa[i * D + m] * G[m];
+        out[a * D + i] = sum * inverse_rho0;
+      }
+    }
+  };
+  in_parallel(pool, threads, rows);
+}
+
 // ------------------------------------------------------------------ FFI handlers
 
 ffi::Error check(const ffi::AnyBuffer& X, const ffi::Buffer<ffi::S32>& idx) {
@@ -274,8 +354,102 @@ ffi::Error SolidMomentum(ffi::ThreadPool pool, ffi::AnyBuffer X, ffi::AnyBuffer 
   return dispatch(X, body);
 }
 
+// the stored-weight sums: x [N, D], P L0 [N, D, D], the weights per slot [N, K, D], the
+// list [N, K]; a box (lx, ly, lz) with its periodic axes (bits of `periodic`)
+ffi::Error check_rows(const ffi::AnyBuffer& grad, const ffi::Buffer<ffi::S32>& idx) {
+  auto dims = grad.dimensions();
+  if (dims.size() != 3 || (dims[2] != 2 && dims[2] != 3))
+    return ffi::Error::InvalidArgument("the weights per slot must be [N, K, 2 or 3]");
+  if (grad.element_type() != ffi::F32 && grad.element_type() != ffi::F64)
+    return ffi::Error::InvalidArgument("the weights per slot must be float32 or float64");
+  if (idx.dimensions().size() != 2 || idx.dimensions()[0] != dims[0] ||
+      idx.dimensions()[1] != dims[1])
+    return ffi::Error::InvalidArgument("the neighbour list must be [N, K]");
+  return ffi::Error::Success();
+}
+
+template <typename Body>
+ffi::Error dispatch_rows(const ffi::AnyBuffer& grad, const Body& body) {
+  const bool single = grad.element_type() == ffi::F32;
+  const int64_t dim = grad.dimensions()[2];
+  if (single && dim == 2) body.template operator()<float, 2>();
+  if (single && dim == 3) body.template operator()<float, 3>();
+  if (!single && dim == 2) body.template operator()<double, 2>();
+  if (!single && dim == 3) body.template operator()<double, 3>();
+  return ffi::Error::Success();
+}
+
+struct DeformationRowsBody {
+  ffi::ThreadPool* pool;
+  const ffi::AnyBuffer &x, &grad;
+  const int32_t* idx;
+  ffi::Result<ffi::AnyBuffer>& F;
+  double lx, ly, lz;
+  int64_t periodic;
+  template <typename T, int D>
+  void operator()() const {
+    const Setting<T> s = setting<T>(D, 1.0, 1.0, 1.0, lx, ly, lz, periodic);
+    const Box<T, D> box = Box<T, D>::of(s);
+    const int64_t n = grad.dimensions()[0], k = grad.dimensions()[1];
+    auto run = [&](auto wrapped) {
+      deformation_by_rows<T, D, decltype(wrapped)::value>(pool, box, data<T>(x), data<T>(grad),
+                                                          idx, n, k, data<T>(F));
+    };
+    if (periodic) run(std::true_type{});
+    else run(std::false_type{});
+  }
+};
+
+ffi::Error DeformationByRows(ffi::ThreadPool pool, ffi::AnyBuffer x, ffi::AnyBuffer grad,
+                             ffi::Buffer<ffi::S32> idx, ffi::Result<ffi::AnyBuffer> F, double lx,
+                             double ly, double lz, int64_t periodic) {
+  if (auto e = check_rows(grad, idx); e.failure()) return e;
+  DeformationRowsBody body{&pool, x, grad, idx.typed_data(), F, lx, ly, lz, periodic};
+  return dispatch_rows(grad, body);
+}
+
+struct ElasticRowsBody {
+  ffi::ThreadPool* pool;
+  const ffi::AnyBuffer &PL0, &grad, &rho0;
+  const int32_t* idx;
+  ffi::Result<ffi::AnyBuffer>& out;
+  template <typename T, int D>
+  void operator()() const {
+    elastic_by_rows<T, D>(pool, data<T>(PL0), data<T>(grad), idx,
+                          grad.dimensions()[0], grad.dimensions()[1], scalar<T>(rho0),
+                          data<T>(out));
+  }
+};
+
+ffi::Error ElasticByRows(ffi::ThreadPool pool, ffi::AnyBuffer PL0, ffi::AnyBuffer grad,
+                         ffi::Buffer<ffi::S32> idx, ffi::AnyBuffer rho0,
+                         ffi::Result<ffi::AnyBuffer> out) {
+  if (auto e = check_rows(grad, idx); e.failure()) return e;
+  ElasticRowsBody body{&pool, PL0, grad, rho0, idx.typed_data(), out};
+  return dispatch_rows(grad, body);
+}
+
 }  // namespace
 
 XLA_FFI_DEFINE_HANDLER_SYMBOL(SphjaxSolidDeformation, SolidDeformation, SPHJAX_BIND(4, 0));
 XLA_FFI_DEFINE_HANDLER_SYMBOL(SphjaxSolidMomentum, SolidMomentum,
                               SPHJAX_BIND(5, 3).Attr<bool>("penalty"));
+XLA_FFI_DEFINE_HANDLER_SYMBOL(SphjaxDeformationByRows, DeformationByRows,
+                              ffi::Ffi::Bind()
+                                  .Ctx<ffi::ThreadPool>()
+                                  .Arg<ffi::AnyBuffer>()
+                                  .Arg<ffi::AnyBuffer>()
+                                  .Arg<ffi::Buffer<ffi::S32>>()
+                                  .Ret<ffi::AnyBuffer>()
+                                  .Attr<double>("lx")
+                                  .Attr<double>("ly")
+                                  .Attr<double>("lz")
+                                  .Attr<int64_t>("periodic"));
+XLA_FFI_DEFINE_HANDLER_SYMBOL(SphjaxElasticByRows, ElasticByRows,
+                              ffi::Ffi::Bind()
+                                  .Ctx<ffi::ThreadPool>()
+                                  .Arg<ffi::AnyBuffer>()
+                                  .Arg<ffi::AnyBuffer>()
+                                  .Arg<ffi::Buffer<ffi::S32>>()
+                                  .Arg<ffi::AnyBuffer>()
+                                  .Ret<ffi::AnyBuffer>());

@@ -156,7 +156,7 @@ def _hydrodynamic_pullback(
 pair_sums.define_pullback(_hydrodynamic_summand, _hydrodynamic_pullback)
 
 
-def _hydrodynamic_loop(keywords, geometry, weight, parity, cross):
+def _hydrodynamic_loop(keywords, geometry, weight, parity, cross, stored):
     """The compiled loop of :func:`_hydrodynamic_summand` (eq. 10 with Monaghan's and
     Morris' viscosity), within one fluid or against a boundary's columns (their ``vv``:
     the velocity the viscous terms see); ``None`` with the transport-velocity terms,
@@ -165,7 +165,7 @@ def _hydrodynamic_loop(keywords, geometry, weight, parity, cross):
         return None
     viscous = keywords["viscous"]
 
-    def loop(rows, cols, idx, shared):
+    def loop(rows, cols, idx, shared, stored):
         parameters = (
             shared.sound_speed,
             shared.artificial_alpha,
@@ -321,17 +321,29 @@ def _solid_pullback(pair, a, b, shared, bar, *, domain, penalty):
 pair_sums.define_pullback(_solid_summand, _solid_pullback)
 
 
-def _solid_loop(keywords, geometry, weight, parity, cross):
-    """The compiled loop of :func:`_solid_summand` with Ganzenmüller's penalty force
-    (eq. 14), each pair once; ``None`` without the penalty force, whose elastic term alone
-    XLA sums faster over the reference geometry stored once per run (measured on the
-    oscillating plate, docs/performance.md)."""
-    if cross or not keywords["penalty"] or weight != "V" or parity != -1:
+def _solid_loop(keywords, geometry, weight, parity, cross, stored):
+    """The compiled loop of :func:`_solid_summand` (eq. 14): without the penalty force,
+    row by row over the reference kernel gradients stored once per run
+    (:func:`sphjax.native.elastic_by_rows`; ``None`` where the list has none); with
+    Ganzenmüller's penalty force, each pair once over the reference geometry
+    (:func:`sphjax.native.solid_momentum`)."""
+    if cross or weight != "V" or parity != -1:
         return None
     if keywords["domain"] != geometry.domain:
         return None
+    if not keywords["penalty"]:
+        if not stored:
+            return None
 
-    def loop(rows, cols, idx, shared):
+        def elastic(rows, cols, idx, shared, stored):
+            a = native.elastic_by_rows(
+                rows["V"], rows["PL0"], stored.grad_w, idx, shared.solid_density
+            )
+            return {"a": a}
+
+        return elastic
+
+    def loop(rows, cols, idx, shared, stored):
         parameters = (shared.solid_density, shared.young_modulus, shared.penalty_alpha)
         a = native.solid_momentum(
             rows["x"],

@@ -804,7 +804,7 @@ def pair_sum(
         raise ValueError("pair_sum: a stored geometry needs a sum within one system")
     loop = None
     if native and pairs.members is None and (same or stored is None):
-        loop = _native_loop(f, geometry, weight, parity, cross=not same)
+        loop = _native_loop(f, geometry, weight, parity, cross=not same, stored=stored is not None)
     if loop is not None:
         xla = functools.partial(
             pair_sum,
@@ -861,22 +861,25 @@ _NATIVE_LOOPS: dict = {}
 
 def define_native(summand: Callable, loop_for: Callable) -> None:
     """Give ``summand`` a compiled loop of :mod:`sphjax.native`: ``loop_for(keywords,
-    geometry, weight, parity, cross)`` returns ``loop(rows, cols, idx, shared)`` (the sum
-    as :func:`pair_sum` returns it: within one system over the symmetric list ``idx``
-    with ``cols=None``, or, with ``cross``, the rows against the columns ``cols`` of
-    another system) for the summand's keyword arguments (those of a
-    ``functools.partial``), or ``None`` where the loop lacks a term they ask for."""
+    geometry, weight, parity, cross, stored)`` returns ``loop(rows, cols, idx, shared,
+    stored)`` (the sum as :func:`pair_sum` returns it: within one system over the
+    symmetric list ``idx`` with ``cols=None``, or, with ``cross``, the rows against the
+    columns ``cols`` of another system) for the summand's keyword arguments (those of a
+    ``functools.partial``), or ``None`` where the loop lacks a term they ask for.
+    ``stored``: for ``loop_for`` whether the list holds the pair geometry stored once per
+    run (:attr:`PairList.geometry`), for ``loop`` that :class:`PairGeometry` (or
+    ``None``), which a loop may read instead of recomputing the geometry."""
     _NATIVE_LOOPS[summand] = loop_for
 
 
-def _native_loop(f, geometry, weight, parity, cross: bool):
+def _native_loop(f, geometry, weight, parity, cross: bool, stored: bool):
     from sphjax import native
 
     func, keywords = (f.func, f.keywords) if isinstance(f, functools.partial) else (f, {})
     loop_for = _NATIVE_LOOPS.get(func)
     if loop_for is None or not native.supports(geometry):
         return None
-    return loop_for(keywords, geometry, weight, parity, cross)
+    return loop_for(keywords, geometry, weight, parity, cross, stored)
 
 
 def _native_sum(loop, xla, rows, cols, pairs: PairList, shared):
@@ -893,7 +896,9 @@ def _native_sum(loop, xla, rows, cols, pairs: PairList, shared):
 
     @jax.custom_jvp
     def summed(rows, cols, shared, stored_leaves, lists):
-        return loop(rows, cols, lists[0].idx, shared)
+        pairs, mask = lists
+        geometry = None if mask is None else PairGeometry(*stored_leaves, mask)
+        return loop(rows, cols, pairs.idx, shared, geometry)
 
     @functools.partial(summed.defjvp, symbolic_zeros=True)
     def summed_jvp(primals, tangents):

@@ -42,12 +42,12 @@ def extrapolation_summand(pair, a, b, shared):
 pair_sums.transpose_by_autodiff(extrapolation_summand)
 
 
-def _extrapolation_loop(keywords, geometry, weight, parity, cross):
+def _extrapolation_loop(keywords, geometry, weight, parity, cross, stored):
     """The compiled loop of :func:`extrapolation_summand` (onto another system only)."""
     if weight is not None or not cross:
         return None
 
-    def loop(rows, cols, idx, shared):
+    def loop(rows, cols, idx, shared, stored):
         sums = native.extrapolation(rows, idx, geometry, cols)
         dim = rows["x"].shape[-1]
         return {

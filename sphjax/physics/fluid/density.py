@@ -66,20 +66,22 @@ def _velocity_divergence_pullback(pair, a, b, shared, bar):
 pair_sums.define_pullback(_velocity_divergence_summand, _velocity_divergence_pullback)
 
 
-def _kernel_loop(keywords, geometry, weight, parity, cross):
+def _kernel_loop(keywords, geometry, weight, parity, cross, stored):
     """The compiled loop of :func:`_kernel_summand` weighted by the mass (eq. 5), within
     the fluid or against a boundary."""
     if weight != "m":
         return None
-    return lambda rows, cols, idx, shared: native.kernel_sum(rows, idx, geometry, cols)
+    return lambda rows, cols, idx, shared, stored: native.kernel_sum(rows, idx, geometry, cols)
 
 
-def _velocity_divergence_loop(keywords, geometry, weight, parity, cross):
+def _velocity_divergence_loop(keywords, geometry, weight, parity, cross, stored):
     """The compiled loop of :func:`_velocity_divergence_summand` weighted by the mass
     (eq. 11), within the fluid or against a boundary."""
     if weight != "m":
         return None
-    return lambda rows, cols, idx, shared: native.velocity_divergence(rows, idx, geometry, cols)
+    return lambda rows, cols, idx, shared, stored: native.velocity_divergence(
+        rows, idx, geometry, cols
+    )
 
 
 pair_sums.define_native(_kernel_summand, _kernel_loop)

@@ -105,13 +105,13 @@ def _continuity_with_diffusion(pair, a, b, shared, *, h):
     return rate + molteni_term(pair, a["rho"], b["rho"], volume_b, hydrostatic, delta, h, c0)
 
 
-def _molteni_loop(keywords, geometry, weight, parity, cross):
+def _molteni_loop(keywords, geometry, weight, parity, cross, stored):
     """The compiled loop of :func:`_continuity_with_diffusion` (both roles of each pair;
     within one fluid only)."""
     if weight is not None or cross:
         return None
 
-    def loop(rows, cols, idx, shared):
+    def loop(rows, cols, idx, shared, stored):
         parameters = (
             shared.gravity,
             shared.reference_density,

@@ -32,6 +32,7 @@ from typing import Any
 
 import jax.numpy as jnp
 
+from sphjax import native
 from sphjax.core.params import CONTACT_FIELDS, SOLID_DEFAULTS, fields_read, refusal
 from sphjax.core.space import displacement_fn
 from sphjax.core.state import Kind
@@ -107,10 +108,9 @@ class SolidSystem:
 
     @property
     def native_pair_sums(self) -> bool:
-        """Whether ``Model.pair_loop="native"`` has a loop for its own sums that a run
-        uses: eq. 14 with the penalty force and the first-order correction (without the
-        penalty, XLA's sums over the stored reference geometry are faster)."""
-        return self.penalty is not None and self.gradient_correction == "first_order"
+        """Whether ``Model.pair_loop="native"`` has loops for its own sums: eqs. 16 and 14
+        with the first-order correction (the second-order one's stay XLA's)."""
+        return self.gradient_correction == "first_order"
 
     def __post_init__(self):
         if not hasattr(self.material, "pk1"):
@@ -278,9 +278,24 @@ pair_sums.define_pullback(_deformation_summand, _deformation_pullback)
 # for `benchmarks/pair_costs.py` to re-measure on other hardware
 pair_sums.transpose_by_autodiff(_deformation_summand)
 
-# no compiled loop here (sphjax.native.solid_deformation has one, each pair once): with the
-# reference geometry stored once per run, XLA's sum is faster on the CPU (the oscillating
-# plate n = 32: 0.2 CPU-ms per sum against 0.9; docs/performance.md)
+
+def _deformation_loop(keywords, geometry, weight, parity, cross, stored):
+    """The compiled loop of :func:`_deformation_summand` (eq. 16): row by row over the
+    reference kernel gradients stored once per run (:func:`sphjax.native.deformation_by_rows`);
+    ``None`` where the list has none (``sphjax.native.solid_deformation``, each pair once
+    with the geometry recomputed, is slower than XLA's sum; docs/performance.md)."""
+    if cross or not stored or weight is not None or keywords["domain"] != geometry.domain:
+        return None
+
+    def loop(rows, cols, idx, shared, stored):
+        return native.deformation_by_rows(
+            rows["xc"], rows["V"], rows["L0"], stored.grad_w, idx, geometry.domain
+        )
+
+    return loop
+
+
+pair_sums.define_native(_deformation_summand, _deformation_loop)
 
 
 def _second_order_moment_summand(pair, a, b, shared, *, h):
