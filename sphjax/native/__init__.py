@@ -26,10 +26,8 @@ stored reference kernel gradients:
 * ``deformation_by_rows``: the deformation gradient ``F`` (eq. 16);
 * ``elastic_by_rows``: eq. 14's elastic pair forces;
 
-and each pair once, the pair geometry recomputed from the reference positions:
-
-* ``solid_deformation``: eq. 16 (slower than XLA's sum; not used by a run);
-* ``solid_momentum``: eq. 14 with Ganzenmüller's penalty force, which a run uses with it.
+and, each pair once with the pair geometry recomputed from the reference positions,
+``solid_momentum``: eq. 14 with Ganzenmüller's penalty force, which a run uses with it.
 
 ``cell_list.cc`` rebuilds the neighbour search's list (:func:`cell_list_rebuild`, used by
 :class:`sphjax.neighbors.NeighborSearch` when ``SearchGeometry.native``): a counting sort
@@ -90,7 +88,6 @@ TARGETS = {
     "sphjax_continuity_molteni": "SphjaxContinuityMolteni",
     "sphjax_momentum": "SphjaxMomentum",
     "sphjax_extrapolation": "SphjaxExtrapolation",
-    "sphjax_solid_deformation": "SphjaxSolidDeformation",
     "sphjax_solid_momentum": "SphjaxSolidMomentum",
     "sphjax_deformation_by_rows": "SphjaxDeformationByRows",
     "sphjax_elastic_by_rows": "SphjaxElasticByRows",
@@ -336,20 +333,6 @@ def extrapolation(rows, idx, geometry, columns):
         _list(idx),
         cross=True,
     )
-
-
-def solid_deformation(X, x, V, L0, idx, geometry):
-    """The deformation gradient ``F_a = -sum_b V0_b x_ab (L0_a grad0_a W(X_ab))^T``
-    (eq. 16), ``[N, d, d]``, over the symmetric reference list ``idx``.
-
-    Args:
-      X: ``[N, d]`` reference positions (the pair geometry: ``X_ab``, ``grad0_a W``).
-      x: ``[N, d]`` current positions (``x_ab``, minimum image).
-      V: ``[N]`` reference volumes ``V0``.
-      L0: ``[N, d, d]`` the correction matrices (eq. 15).
-    """
-    n, d = X.shape
-    return _call("sphjax_solid_deformation", (n, d, d), X.dtype, geometry, X, x, V, L0, _list(idx))
 
 
 def solid_momentum(X, x, V, PL0, F, idx, geometry, parameters, *, penalty: bool):

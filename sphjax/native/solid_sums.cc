@@ -1,16 +1,12 @@
 // The pair sums of an elastic solid (total-Lagrangian SPH) as compiled loops, called
 // from XLA (FFI handlers).
 //
-// Both go over the solid's reference neighbour list (symmetric: b in N(a) iff a in N(b))
-// with pair_loop.h's each_pair_once, each pair once, its term added to both particles.
+// The penalty force's momentum goes over the solid's reference neighbour list (symmetric:
+// b in N(a) iff a in N(b)) with pair_loop.h's each_pair_once, each pair once, its term added to both particles.
 // The pair geometry of the loop is the reference one: X_ab = X_a - X_b (minimum image on
 // periodic axes), W(X_ab) and grad0_a W(X_ab), from the reference positions X; the
 // current positions x are a field of the sums (x_ab = x_a - x_b, minimum image).
 //
-//   sphjax_solid_deformation  F_a = S_a L0_a^T,  S_a = sum_b -V0_b x_ab grad0_a W(X_ab)^T
-//                             (eq. 16: F_a = -sum_b V0_b x_ab (L0_a grad0_a W)^T; the pair
-//                             term of S is symmetric under a <-> b, as x_ab and grad0 W
-//                             both change sign, so L0_a, which is not, comes after the sum)
 //   sphjax_solid_momentum     sum_b V0_b [(P L0)_a + (P L0)_b] grad0_a W(X_ab) / rho0
 //                             + the penalty force f^PF_ab / (V0_a V0_b rho0)
 //                             (eq. 14 per unit mass with rho0 = m0 / V0; Ganzenmüller 2015's
@@ -40,42 +36,6 @@ struct Box {
     return box;
   }
   T image(T d, int i) const { return d - size[i] * std::nearbyint(d * inverse[i]); }
-};
-
-template <typename T, int D>
-struct OwnDeformation {
-  T V, x[D];
-};
-
-// eq. 16's pair term before L0: -x_ab grad0_a W(X_ab)^T, times V0_b for a and V0_a for b
-// (S_ij = sum_b -V0_b x_ab,i grad0 W_j)
-template <typename T, int D>
-struct DeformationTerm {
-  static constexpr bool within = true, between = false;
-  static constexpr int width = D * D, fields = 1 + D;
-  const T *V, *x;
-  Box<T, D> box;
-  void load(int64_t b, T* into, int64_t stride) const {
-    into[0] = V[b];
-    for (int i = 0; i < D; i++) into[(1 + i) * stride] = x[b * D + i];
-  }
-  OwnDeformation<T, D> row(int64_t a) const {
-    OwnDeformation<T, D> o{V[a], {}};
-    for (int i = 0; i < D; i++) o.x[i] = x[a * D + i];
-    return o;
-  }
-  void pair(const OwnDeformation<T, D>& o, const Pair<T, D>& p, const T* from, int64_t stride,
-            T* on_a, T* on_b) const {
-    const T V_b = from[0];
-    for (int i = 0; i < D; i++) {
-      const T dx = box.image(o.x[i] - from[(1 + i) * stride], i);
-      for (int j = 0; j < D; j++) {
-        const T s = -dx * p.grad[j];
-        on_a[(i * D + j) * stride] = V_b * s;
-        on_b[(i * D + j) * stride] = o.V * s;
-      }
-    }
-  }
 };
 
 template <typename T, int D>
@@ -148,25 +108,6 @@ struct SolidMomentumTerm {
     }
   }
 };
-
-template <typename T, int D>
-void deformation_gradient(ffi::ThreadPool* pool, int kernel, const Setting<T>& s, const T* X,
-                          const T* x, const T* V, const T* L0, const int32_t* idx, int64_t n,
-                          int64_t k, T* F) {
-  std::vector<T> S(n * D * D);
-  by_kernel<T, D>(pool, kernel, s, X, idx, n, k, S.data(),
-                  DeformationTerm<T, D>{V, x, Box<T, D>::of(s)});
-  for (int64_t a = 0; a < n; a++) {  // F_a = S_a L0_a^T
-    const T* Sa = S.data() + a * D * D;
-    const T* La = L0 + a * D * D;
-    for (int i = 0; i < D; i++)
-      for (int j = 0; j < D; j++) {
-        T sum = T(0);
-        for (int m = 0; m < D; m++) sum += Sa[i * D + m] * La[j * D + m];
-        F[a * D * D + i * D + j] = sum;
-      }
-  }
-}
 
 template <typename T, int D>
 void solid_momentum(ffi::ThreadPool* pool, int kernel, const Setting<T>& s, const T* X,
@@ -293,34 +234,6 @@ T scalar(const ffi::AnyBuffer& buffer) {
   return *data<T>(buffer);
 }
 
-struct DeformationBody {
-  ffi::ThreadPool* pool;
-  const ffi::AnyBuffer &X, &x, &V, &L0;
-  const int32_t* idx;
-  int64_t n, k;
-  ffi::Result<ffi::AnyBuffer>& F;
-  int64_t kernel;
-  double h, cutoff, sigma, lx, ly, lz;
-  int64_t periodic;
-  template <typename T, int D>
-  void operator()() const {
-    const Setting<T> s = setting<T>(D, h, cutoff, sigma, lx, ly, lz, periodic);
-    deformation_gradient<T, D>(pool, int(kernel), s, data<T>(X), data<T>(x), data<T>(V),
-                               data<T>(L0), idx, n, k, data<T>(F));
-  }
-};
-
-ffi::Error SolidDeformation(ffi::ThreadPool pool, ffi::AnyBuffer X, ffi::AnyBuffer x,
-                            ffi::AnyBuffer V, ffi::AnyBuffer L0, ffi::Buffer<ffi::S32> idx,
-                            ffi::Result<ffi::AnyBuffer> F, SPHJAX_SETTING_ATTRS) {
-  if (auto e = check(X, idx); e.failure()) return e;
-  if (cross) return ffi::Error::InvalidArgument("a solid's sums are within the solid");
-  DeformationBody body{&pool, X,      x,     V,  L0, idx.typed_data(), X.dimensions()[0],
-                       idx.dimensions()[1], F, kernel, h, cutoff, sigma, lx,
-                       ly,    lz,     periodic};
-  return dispatch(X, body);
-}
-
 struct MomentumBody {
   ffi::ThreadPool* pool;
   const ffi::AnyBuffer &X, &x, &V, &PL0, &F, &rho0, &young_modulus, &alpha;
@@ -431,7 +344,6 @@ ffi::Error ElasticByRows(ffi::ThreadPool pool, ffi::AnyBuffer PL0, ffi::AnyBuffe
 
 }  // namespace
 
-XLA_FFI_DEFINE_HANDLER_SYMBOL(SphjaxSolidDeformation, SolidDeformation, SPHJAX_BIND(4, 0));
 XLA_FFI_DEFINE_HANDLER_SYMBOL(SphjaxSolidMomentum, SolidMomentum,
                               SPHJAX_BIND(5, 3).Attr<bool>("penalty"));
 XLA_FFI_DEFINE_HANDLER_SYMBOL(SphjaxDeformationByRows, DeformationByRows,

@@ -282,8 +282,8 @@ pair_sums.transpose_by_autodiff(_deformation_summand)
 def _deformation_loop(keywords, geometry, weight, parity, cross, stored):
     """The compiled loop of :func:`_deformation_summand` (eq. 16): row by row over the
     reference kernel gradients stored once per run (:func:`sphjax.native.deformation_by_rows`);
-    ``None`` where the list has none (``sphjax.native.solid_deformation``, each pair once
-    with the geometry recomputed, is slower than XLA's sum; docs/performance.md)."""
+    ``None`` where the list has none (a loop over each pair once with the geometry
+    recomputed was slower than XLA's sum; docs/performance.md)."""
     if cross or not stored or weight is not None or keywords["domain"] != geometry.domain:
         return None
 
