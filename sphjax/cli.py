@@ -253,8 +253,8 @@ def _add_run(sub) -> None:
         choices=("xla", "native"),
         default="xla",
         help="'native': pair sums as compiled loops (a fluid's own, each pair once, and "
-        "against walls, solids and bodies; an elastic solid's momentum with the penalty "
-        "force) "
+        "against walls, solids and bodies; an elastic solid's deformation gradient and "
+        "momentum, first-order correction) "
         "(CPU only; built with the machine's C++ compiler at first use); see "
         "Model.pair_loop",
     )
