@@ -219,9 +219,8 @@ ffi::Error check(const ffi::AnyBuffer& X, const ffi::Buffer<ffi::S32>& idx) {
 
 // body.template operator()<T, D>() for the call's element type and dimension
 template <typename Body>
-ffi::Error dispatch(const ffi::AnyBuffer& X, const Body& body) {
-  const bool single = X.element_type() == ffi::F32;
-  const int64_t dim = X.dimensions()[1];
+ffi::Error dispatch(ffi::DataType type, int64_t dim, const Body& body) {
+  const bool single = type == ffi::F32;
   if (single && dim == 2) body.template operator()<float, 2>();
   if (single && dim == 3) body.template operator()<float, 3>();
   if (!single && dim == 2) body.template operator()<double, 2>();
@@ -264,7 +263,7 @@ ffi::Error SolidMomentum(ffi::ThreadPool pool, ffi::AnyBuffer X, ffi::AnyBuffer 
   MomentumBody body{&pool,   X,      x,     V,     PL0, F,  rho0, young_modulus, alpha,
                     idx.typed_data(), X.dimensions()[0], idx.dimensions()[1], out, kernel, h,
                     cutoff,  sigma,  lx,    ly,    lz,  periodic, penalty};
-  return dispatch(X, body);
+  return dispatch(X.element_type(), X.dimensions()[1], body);
 }
 
 // the stored-weight sums: x [N, D], P L0 [N, D, D], the weights per slot [N, K, D], the
@@ -278,17 +277,6 @@ ffi::Error check_rows(const ffi::AnyBuffer& grad, const ffi::Buffer<ffi::S32>& i
   if (idx.dimensions().size() != 2 || idx.dimensions()[0] != dims[0] ||
       idx.dimensions()[1] != dims[1])
     return ffi::Error::InvalidArgument("the neighbour list must be [N, K]");
-  return ffi::Error::Success();
-}
-
-template <typename Body>
-ffi::Error dispatch_rows(const ffi::AnyBuffer& grad, const Body& body) {
-  const bool single = grad.element_type() == ffi::F32;
-  const int64_t dim = grad.dimensions()[2];
-  if (single && dim == 2) body.template operator()<float, 2>();
-  if (single && dim == 3) body.template operator()<float, 3>();
-  if (!single && dim == 2) body.template operator()<double, 2>();
-  if (!single && dim == 3) body.template operator()<double, 3>();
   return ffi::Error::Success();
 }
 
@@ -318,7 +306,7 @@ ffi::Error DeformationByRows(ffi::ThreadPool pool, ffi::AnyBuffer x, ffi::AnyBuf
                              double ly, double lz, int64_t periodic) {
   if (auto e = check_rows(grad, idx); e.failure()) return e;
   DeformationRowsBody body{&pool, x, grad, idx.typed_data(), F, lx, ly, lz, periodic};
-  return dispatch_rows(grad, body);
+  return dispatch(grad.element_type(), grad.dimensions()[2], body);
 }
 
 struct ElasticRowsBody {
@@ -339,7 +327,7 @@ ffi::Error ElasticByRows(ffi::ThreadPool pool, ffi::AnyBuffer PL0, ffi::AnyBuffe
                          ffi::Result<ffi::AnyBuffer> out) {
   if (auto e = check_rows(grad, idx); e.failure()) return e;
   ElasticRowsBody body{&pool, PL0, grad, rho0, idx.typed_data(), out};
-  return dispatch_rows(grad, body);
+  return dispatch(grad.element_type(), grad.dimensions()[2], body);
 }
 
 }  // namespace
