@@ -68,7 +68,10 @@ SOURCES = tuple(
     Path(__file__).with_name(name) for name in ("pair_sums.cc", "solid_sums.cc", "cell_list.cc")
 )
 #: the headers they include (part of the build's key)
-HEADERS = tuple(Path(__file__).with_name(name) for name in ("threads.h", "pair_loop.h"))
+HEADERS = tuple(
+    Path(__file__).with_name(name)
+    for name in ("threads.h", "pair_geometry.h", "cell_blocked.h", "pair_loop.h")
+)
 FLAGS = (
     "-O3",
     "-march=native",

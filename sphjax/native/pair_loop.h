@@ -1,125 +1,23 @@
-// The pair loop that sphjax's compiled pair sums share: kernel shapes, the pair
-// geometry, and each_pair_once, which evaluates a Term over a symmetric neighbour list
-// once per pair and adds its numbers to both particles (see pair_sums.cc for the sums).
+// The pair loops that sphjax's compiled pair sums share: within one system the
+// cell-blocked loop (cell_blocked.h) or each_pair_once, which evaluates a Term over a
+// symmetric neighbour list once per pair and adds its numbers to both particles; between
+// two systems rows_against_columns (see pair_sums.cc for the sums).
 #pragma once
 
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
+#include <cstdlib>
+#include <cstring>
 #include <type_traits>
 #include <vector>
 
+#include "cell_blocked.h"
+#include "pair_geometry.h"
 #include "threads.h"
 #include "xla/ffi/api/ffi.h"
 
 namespace sphjax_native {
-
-// A thread's rows are compiled with everything they call inlined (the pair geometry, the
-// Term's arithmetic): left to its own budget GCC may call them from the vectorised loop,
-// which then stays scalar (three times slower; checked with objdump's AVX count)
-#define SPHJAX_FLATTEN __attribute__((flatten))
-
-namespace ffi = xla::ffi;
-
-template <typename T>
-inline T positive(T x) {
-  return x > T(0) ? x : T(0);
-}
-
-// kernel shapes f(q) and f'(q) of sphjax.core.kernels, by the ids of sphjax/native
-template <typename T, int Kernel>
-struct Shape;
-
-template <typename T>
-struct Shape<T, 0> {  // cubic spline
-  static T value(T q) {
-    T a = positive(T(2) - q), b = positive(T(1) - q);
-    return T(0.25) * a * a * a - b * b * b;
-  }
-  static T derivative(T q) {
-    T a = positive(T(2) - q), b = positive(T(1) - q);
-    return T(-0.75) * a * a + T(3) * b * b;
-  }
-};
-
-template <typename T>
-struct Shape<T, 1> {  // quintic spline
-  static T value(T q) {
-    T a = positive(T(3) - q), b = positive(T(2) - q), c = positive(T(1) - q);
-    T a2 = a * a, b2 = b * b, c2 = c * c;
-    return a2 * a2 * a - T(6) * b2 * b2 * b + T(15) * c2 * c2 * c;
-  }
-  static T derivative(T q) {
-    T a = positive(T(3) - q), b = positive(T(2) - q), c = positive(T(1) - q);
-    T a2 = a * a, b2 = b * b, c2 = c * c;
-    return T(-5) * (a2 * a2 - T(6) * b2 * b2 + T(15) * c2 * c2);
-  }
-};
-
-template <typename T>
-struct Shape<T, 2> {  // Wendland C2
-  static T value(T q) {
-    T s = positive(T(1) - T(0.5) * q), s2 = s * s;
-    return s2 * s2 * (T(2) * q + T(1));
-  }
-  static T derivative(T q) {
-    T s = positive(T(1) - T(0.5) * q);
-    return T(-5) * q * s * s * s;
-  }
-};
-
-template <typename T>
-struct Shape<T, 3> {  // Wendland C4
-  static T value(T q) {
-    T s = positive(T(1) - T(0.5) * q), s2 = s * s;
-    return s2 * s2 * s2 * (T(35.0 / 12.0) * q * q + T(3) * q + T(1));
-  }
-  static T derivative(T q) {
-    T s = positive(T(1) - T(0.5) * q), s2 = s * s;
-    return -T(14.0 / 3.0) * q * (T(1) + T(2.5) * q) * s2 * s2 * s;
-  }
-};
-
-// what every pair sees: the kernel's scale and the box
-template <typename T>
-struct Setting {
-  T h, inverse_h, cutoff2, w_scale, grad_scale;  // W = w_scale f(q), W' = grad_scale f'(q)
-  T size[3];        // the box's lengths on the periodic axes, 0 on the others
-  T inverse[3];     // their inverses (0 on the others: no image is subtracted)
-};
-
-// one pair's geometry
-template <typename T, int D>
-struct Pair {
-  T dr[D];    // r_a - r_b (minimum image)
-  T r2;       // |r_ab|^2
-  T w;        // W_ab
-  T grad[D];  // grad_a W_ab
-};
-
-// The geometry of the pair of a (at xa) and b (at xb[i * stride]): the minimum image,
-// and W = grad W = 0 outside the support (grad W = 0 at r = 0), without a branch.
-template <typename T, int D, int Kernel>
-inline Pair<T, D> pair_of(const Setting<T>& s, const T* xa, const T* xb, int64_t stride) {
-  Pair<T, D> p;
-  T r2 = T(0);
-  for (int i = 0; i < D; i++) {
-    T d = xa[i] - xb[i * stride];
-    d -= s.size[i] * std::nearbyint(d * s.inverse[i]);  // the minimum image
-    p.dr[i] = d;
-    r2 += d * d;
-  }
-  const T inside = r2 < s.cutoff2 ? T(1) : T(0);
-  const T r = std::sqrt(r2);
-  const T q = r * s.inverse_h;
-  const T safe = r > T(0) ? r : T(1);
-  p.r2 = r2;
-  p.w = inside * s.w_scale * Shape<T, Kernel>::value(q);
-  const T factor =
-      r > T(0) ? inside * s.grad_scale * Shape<T, Kernel>::derivative(q) / safe : T(0);
-  for (int i = 0; i < D; i++) p.grad[i] = factor * p.dr[i];
-  return p;
-}
 
 // The loop.  For each row a of the list, its neighbours b > a are gathered into
 // contiguous buffers (positions, and the Term's F numbers per neighbour: Term::load),
@@ -132,8 +30,8 @@ inline Pair<T, D> pair_of(const Setting<T>& s, const T* xa, const T* xb, int64_t
 // A Term: `within` and `between`: whether it sums within one system (each_pair_once)
 // and between two (rows_against_columns); `width` numbers per particle out, `fields` numbers per neighbour gathered by
 // load(b, into, stride) (into[f * stride] for f < fields), row(a): what it reads of a,
-// pair(own, p, from, stride, on_a, on_b): the pair's numbers for a and for b
-// (on_a[w * stride], on_b[w * stride] for w < width).
+// pair(own, p, from, stride, on_a, on_b, step): the pair's numbers for a and for b
+// (on_a[w * step], on_b[w * step] for w < width).
 template <typename T, int D, int Kernel, typename Term>
 void each_pair_once(ffi::ThreadPool* pool, const Setting<T>& s, const T* x, const int32_t* idx,
                     int64_t n, int64_t k, T* out, const Term& term) {
@@ -170,7 +68,7 @@ void each_pair_once(ffi::ThreadPool* pool, const Setting<T>& s, const T* x, cons
         const Pair<T, D> p = pair_of<T, D, Kernel>(s, xa, xb + j, k);
         // written straight into the buffers: a Term's W numbers held in a local array
         // per pair would become strided stores, which keep GCC from vectorising the loop
-        term.pair(own, p, fb + j, k, oa + j, ob + j);
+        term.pair(own, p, fb + j, k, oa + j, ob + j, k);
       }
       for (int w = 0; w < W; w++) {
         T sum = T(0);
@@ -226,7 +124,7 @@ void rows_against_columns(ffi::ThreadPool* pool, const Setting<T>& s, const T* x
 #pragma omp simd
       for (int64_t j = 0; j < count; j++) {
         const Pair<T, D> p = pair_of<T, D, Kernel>(s, xa, xb + j, k);
-        columns.pair(own, p, fb + j, k, oa + j, ob + j);
+        columns.pair(own, p, fb + j, k, oa + j, ob + j, k);
       }
       for (int w = 0; w < W; w++) {
         T sum = T(0);
@@ -238,8 +136,16 @@ void rows_against_columns(ffi::ThreadPool* pool, const Setting<T>& s, const T* x
   in_parallel(pool, threads, block);
 }
 
-// A sum over pairs with the kernel as a template argument: within one system
-// (`columns` == nullptr: each_pair_once over a symmetric list) or rows against columns.
+// Whether a sum within one system takes the cell-blocked loop: yes, unless
+// $SPHJAX_NATIVE_CELLS is 0 (each_pair_once over the list then, to compare the two).
+inline bool cells_wanted() {
+  const char* env = std::getenv("SPHJAX_NATIVE_CELLS");
+  return env == nullptr || std::strcmp(env, "0") != 0;
+}
+
+// A sum over pairs with the kernel as a template argument: within one system (`columns`
+// == nullptr: the cell-blocked loop where a grid serves, else each_pair_once over the
+// symmetric list) or rows against columns.
 template <typename T, int D, typename Term>
 void sum_pairs(ffi::ThreadPool* pool, int kernel, const Setting<T>& s, const T* x_rows,
                const T* x_columns, const int32_t* idx, int64_t n_rows, int64_t n_columns,
@@ -247,8 +153,10 @@ void sum_pairs(ffi::ThreadPool* pool, int kernel, const Setting<T>& s, const T* 
   auto with = [&](auto shape) {
     constexpr int K = decltype(shape)::value;
     if constexpr (Term::within)  // (only the loops a Term has are compiled)
-      if (columns == nullptr)
+      if (columns == nullptr) {
+        if (cells_wanted() && cell_blocked<T, D, K>(pool, s, x_rows, n_rows, out, rows)) return;
         return each_pair_once<T, D, K>(pool, s, x_rows, idx, n_rows, k, out, rows);
+      }
     if constexpr (Term::between)
       if (columns != nullptr)
         return rows_against_columns<T, D, K>(pool, s, x_rows, x_columns, idx, n_rows,
@@ -278,24 +186,6 @@ const T* data(const ffi::AnyBuffer& buffer) {
 template <typename T>
 T* data(ffi::Result<ffi::AnyBuffer>& buffer) {
   return reinterpret_cast<T*>(buffer->untyped_data());
-}
-
-template <typename T>
-Setting<T> setting(int dim, double h, double cutoff, double sigma, double lx, double ly,
-                   double lz, int64_t periodic) {
-  Setting<T> s;
-  s.h = T(h);
-  s.inverse_h = T(1.0 / h);
-  s.cutoff2 = T(cutoff * cutoff);
-  s.w_scale = T(sigma / std::pow(h, dim));
-  s.grad_scale = T(sigma / std::pow(h, dim + 1));
-  const double size[3] = {lx, ly, lz};
-  for (int i = 0; i < 3; i++) {
-    const bool on = (periodic >> i) & 1;
-    s.size[i] = on ? T(size[i]) : T(0);
-    s.inverse[i] = on ? T(1.0 / size[i]) : T(0);
-  }
-  return s;
 }
 
 }  // namespace sphjax_native

@@ -47,7 +47,8 @@ struct KernelSumTerm {  // sum_b m_b W_ab
   const T* m;
   void load(int64_t b, T* into, int64_t stride) const { into[0] = m[b]; }
   T row(int64_t a) const { return m[a]; }
-  void pair(T m_a, const Pair<T, D>& p, const T* from, int64_t stride, T* on_a, T* on_b) const {
+  void pair(T m_a, const Pair<T, D>& p, const T* from, int64_t stride, T* on_a, T* on_b,
+            int64_t step) const {
     on_a[0] = from[0] * p.w;
     on_b[0] = m_a * p.w;
   }
@@ -73,7 +74,7 @@ struct DivergenceTerm {  // sum_b m_b (v_a - v_b) . grad_a W_ab
     return o;
   }
   void pair(const Own<T, D>& o, const Pair<T, D>& p, const T* from, int64_t stride, T* on_a,
-            T* on_b) const {
+            T* on_b, int64_t step) const {
     T flux = T(0);
     for (int i = 0; i < D; i++) flux += (o.v[i] - from[(1 + i) * stride]) * p.grad[i];
     on_a[0] = from[0] * flux;
@@ -106,7 +107,7 @@ struct MolteniTerm {
     return o;
   }
   void pair(const Own<T, D>& o, const Pair<T, D>& p, const T* from, int64_t stride, T* on_a,
-            T* on_b) const {
+            T* on_b, int64_t step) const {
     const T m_b = from[0], rho_b = from[stride];
     T flux = T(0), along = T(0), drho = o.rho - rho_b;
     for (int i = 0; i < D; i++) {
@@ -151,7 +152,7 @@ struct MomentumTerm {
     return o;
   }
   void pair(const OwnMomentum<T, D>& o, const Pair<T, D>& p, const T* from, int64_t stride,
-            T* on_a, T* on_b) const {
+            T* on_a, T* on_b, int64_t step) const {
     const T m_b = from[0], rho_b = from[stride], P_b = from[2 * stride], inv_b = from[3 * stride];
     T v_ab[D], vr = T(0), along = T(0);
     for (int i = 0; i < D; i++) {
@@ -166,8 +167,8 @@ struct MomentumTerm {
     const T factor = morris * nu * (o.inv + inv_b) * along * inverse_denominator;
     for (int i = 0; i < D; i++) {
       const T f = -term * p.grad[i] + factor * v_ab[i];
-      on_a[i * stride] = m_b * f;
-      on_b[i * stride] = -o.m * f;
+      on_a[i * step] = m_b * f;
+      on_b[i * step] = -o.m * f;
     }
   }
 };
@@ -268,12 +269,13 @@ struct ExtrapolationTerm {
     for (int i = 0; i < D; i++) into[(2 + i) * stride] = v[b * D + i];
   }
   int row(int64_t) const { return 0; }
-  void pair(int, const Pair<T, D>& q, const T* from, int64_t stride, T* on_a, T* on_b) const {
+  void pair(int, const Pair<T, D>& q, const T* from, int64_t stride, T* on_a, T* on_b,
+            int64_t step) const {
     on_a[0] = q.w;
-    on_a[stride] = from[0] * q.w;
+    on_a[step] = from[0] * q.w;
     for (int i = 0; i < D; i++) {
-      on_a[(2 + i) * stride] = from[stride] * q.w * q.dr[i];
-      on_a[(2 + D + i) * stride] = q.w * from[(2 + i) * stride];
+      on_a[(2 + i) * step] = from[stride] * q.w * q.dr[i];
+      on_a[(2 + D + i) * step] = q.w * from[(2 + i) * stride];
     }
     on_b[0] = T(0);
   }

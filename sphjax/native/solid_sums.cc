@@ -71,7 +71,7 @@ struct SolidMomentumTerm {
     return o;
   }
   void pair(const OwnSolid<T, D>& o, const Pair<T, D>& p, const T* from, int64_t stride,
-            T* on_a, T* on_b) const {
+            T* on_a, T* on_b, int64_t step) const {
     const T V_b = from[0];
     T acceleration[D];
     for (int i = 0; i < D; i++) {  // ((P L0)_a + (P L0)_b) grad0_a W / rho0
@@ -103,8 +103,8 @@ struct SolidMomentumTerm {
       for (int i = 0; i < D; i++) acceleration[i] += magnitude * dx[i];
     }
     for (int i = 0; i < D; i++) {
-      on_a[i * stride] = V_b * acceleration[i];
-      on_b[i * stride] = -o.V * acceleration[i];
+      on_a[i * step] = V_b * acceleration[i];
+      on_b[i * step] = -o.V * acceleration[i];
     }
   }
 };
