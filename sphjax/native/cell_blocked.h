@@ -38,7 +38,8 @@ namespace sphjax_native {
 // inverse width, the period of each periodic axis (0 on the others), and R.
 struct CellGrid {
   int64_t cells[3] = {1, 1, 1};
-  double origin[3] = {0, 0, 0}, inverse_width[3] = {0, 0, 0}, period[3] = {0, 0, 0};
+  double origin[3] = {0, 0, 0}, inverse_width[3] = {0, 0, 0};
+  double period[3] = {0, 0, 0}, inverse_period[3] = {0, 0, 0};
   int reach = 1;
   int64_t count() const { return cells[0] * cells[1] * cells[2]; }
 };
@@ -62,6 +63,7 @@ bool grid_for(const Setting<T>& s, const T* x, int64_t n, CellGrid* g) {
       g->origin[i] = 0;
       g->inverse_width[i] = cells / period;
       g->period[i] = period;
+      g->inverse_period[i] = 1 / period;
     } else {
       double lo = x[i], hi = x[i];
       for (int64_t a = 1; a < n; a++) {
@@ -147,7 +149,7 @@ int half_shell(const CellGrid& g, const int64_t* start, const int64_t* c, Run<T>
 template <typename T>
 struct Sorted {
   std::vector<int32_t> order;
-  std::vector<int64_t> start;
+  std::vector<int64_t> key, start, next;  // each particle's cell; each cell's first place
   std::vector<T> x, fields, sums;
   int64_t stride;
 };
@@ -163,39 +165,51 @@ bool cell_blocked(ffi::ThreadPool* pool, const Setting<T>& s, const T* x, int64_
   if (!grid_for<T, D>(s, x, n, &g)) return false;
   const int R = g.reach;
 
-  // 1. counting sort into cells (axis 0 fastest), then the copies into cell order
+  // 1. counting sort into cells (axis 0 fastest), then the copies into cell order (the
+  // cells and the copies shared between the threads)
   thread_local Sorted<T> at;  // kept between calls: no new pages each step
   const int64_t cells = g.count(), stride = n + L;
-  std::vector<int64_t> own(n);
-  at.start.assign(cells + 1, 0);
-  for (int64_t a = 0; a < n; a++) {
-    int64_t key = 0;
-    for (int i = D - 1; i >= 0; i--) {
-      double u = double(x[a * D + i]) - g.origin[i];
-      if (g.period[i] > 0) u -= g.period[i] * std::floor(u / g.period[i]);
-      const int64_t c = std::clamp<int64_t>(int64_t(u * g.inverse_width[i]), 0, g.cells[i] - 1);
-      key = key * g.cells[i] + c;
+  const int64_t threads = thread_count(pool, n);
+  // a position on a periodic axis wrapped into the box, the same in both passes (the
+  // cell is that of the wrapped position, which the pairs see)
+  T period[D], inverse[D];
+  for (int i = 0; i < D; i++) period[i] = T(g.period[i]), inverse[i] = T(g.inverse_period[i]);
+  auto wrapped = [&](int64_t a, int i) {
+    const T u = x[a * D + i];
+    return u - period[i] * std::floor(u * inverse[i]);
+  };
+  at.key.resize(n);
+  int64_t* key = at.key.data();
+  in_parallel(pool, threads, [&, key](int64_t t) {
+    for (int64_t a = n * t / threads; a < n * (t + 1) / threads; a++) {
+      int64_t k = 0;
+      for (int i = D - 1; i >= 0; i--) {
+        const double u = (double(wrapped(a, i)) - g.origin[i]) * g.inverse_width[i];
+        k = k * g.cells[i] + std::clamp<int64_t>(int64_t(u), 0, g.cells[i] - 1);
+      }
+      key[a] = k;
     }
-    own[a] = key;
-    at.start[key + 1]++;
-  }
+  });
+  at.start.assign(cells + 1, 0);
+  for (int64_t a = 0; a < n; a++) at.start[key[a] + 1]++;
   for (int64_t c = 0; c < cells; c++) at.start[c + 1] += at.start[c];
+  at.next.assign(at.start.begin(), at.start.end() - 1);
   at.order.resize(n);
-  {
-    std::vector<int64_t> next(at.start.begin(), at.start.end() - 1);
-    for (int64_t a = 0; a < n; a++) at.order[next[own[a]]++] = static_cast<int32_t>(a);
-  }
+  for (int64_t a = 0; a < n; a++) at.order[at.next[key[a]]++] = static_cast<int32_t>(a);
   at.x.resize(D * stride);
   at.fields.resize(std::max(F, 1) * stride);
-  at.sums.assign(W * stride, T(0));
-  for (int64_t j = 0; j < stride; j++) {
-    const int64_t a = at.order[std::min(j, n - 1)];
-    for (int i = 0; i < D; i++) {
-      T u = x[a * D + i];
-      if (g.period[i] > 0) u -= T(g.period[i]) * std::floor(u / T(g.period[i]));
-      at.x[i * stride + j] = u;
-    }
-    term.load(a, at.fields.data() + j, stride);
+  at.sums.resize(W * stride);
+  {
+    const int32_t* order = at.order.data();
+    T *xs = at.x.data(), *fs = at.fields.data(), *sums = at.sums.data();
+    in_parallel(pool, threads, [&, order, xs, fs, sums](int64_t t) {
+      for (int64_t j = stride * t / threads; j < stride * (t + 1) / threads; j++) {
+        const int64_t a = order[std::min(j, n - 1)];  // (past n: copies of the last)
+        for (int i = 0; i < D; i++) xs[i * stride + j] = wrapped(a, i);
+        term.load(a, fs + j, stride);
+        for (int w = 0; w < W; w++) sums[w * stride + j] = T(0);
+      }
+    });
   }
 
   // 2. the pairs, slice by slice of the slowest axis
@@ -257,18 +271,17 @@ bool cell_blocked(ffi::ThreadPool* pool, const Setting<T>& s, const T* x, int64_
       }
     }
   };
-  const int64_t threads =
-      std::min<int64_t>(thread_count(pool, n), std::max<int64_t>(1, slices / (2 * R)));
-  if (threads == 1) {
+  const int64_t stripes = std::min<int64_t>(threads, std::max<int64_t>(1, slices / (2 * R)));
+  if (stripes == 1) {
     over(0, slices);
   } else {
     auto stripe = [&](int64_t t, bool last) {
-      const int64_t lo = slices * t / threads, hi = slices * (t + 1) / threads;
+      const int64_t lo = slices * t / stripes, hi = slices * (t + 1) / stripes;
       if (last) over(hi - R, hi);
       else over(lo, hi - R);
     };
-    in_parallel(pool, threads, [&](int64_t t) { stripe(t, false); });
-    in_parallel(pool, threads, [&](int64_t t) { stripe(t, true); });
+    in_parallel(pool, stripes, [&](int64_t t) { stripe(t, false); });
+    in_parallel(pool, stripes, [&](int64_t t) { stripe(t, true); });
   }
 
   // 3. back into the particles' order
