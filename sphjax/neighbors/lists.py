@@ -100,9 +100,7 @@ class PairList:
     geometry: object | None = None
 
 
-@pytree_dataclass(
-    static=("plan", "blocks", "union", "capacities", "member_capacities", "support_capacities")
-)
+@dataclasses.dataclass(frozen=True)
 class Neighbors:
     """Neighbour data of one simulation.
 
@@ -149,6 +147,63 @@ class Neighbors:
     skin: dict | None = None
     support_origin: jax.Array | None = None
     counts: jax.Array | None = None
+
+    def replace(self, **changes) -> Neighbors:
+        return dataclasses.replace(self, **changes)
+
+
+# Neighbors as a pytree.  A system alone in the search (one fluid, say) has the search's
+# list itself as its list (:func:`_split`): as a pytree it is one leaf, its PairList made
+# again from the search's list when the tree is rebuilt.  Two leaves would be two buffers
+# of XLA, and a loop of steps would copy the list from one into the other every step
+# (8 MB a step at 40,000 particles).
+_NEIGHBORS_STATIC = (
+    "plan",
+    "blocks",
+    "union",
+    "capacities",
+    "member_capacities",
+    "support_capacities",
+)
+_NEIGHBORS_DATA = ("search", "pairs", "overflow", "reference", "skin", "support_origin", "counts")
+
+
+def _search_lists(neighbors: Neighbors) -> tuple:
+    """The keys of ``neighbors.pairs`` whose lists are the search's own (:func:`_split`:
+    a system in the current configuration whose list is neither split, compacted nor
+    kept at two levels)."""
+    if neighbors.search is None:
+        return ()
+    kept = dict(neighbors.capacities) | dict(neighbors.member_capacities)
+    kept |= dict(neighbors.support_capacities)
+    return tuple(
+        (i, j)
+        for i, j in neighbors.pairs
+        if i == j and neighbors.plan.current[i] and (i, j) not in kept
+    )
+
+
+def _flatten_neighbors(neighbors: Neighbors):
+    derived = _search_lists(neighbors)
+    pairs = {k: v for k, v in neighbors.pairs.items() if k not in derived}
+    data = [pairs if name == "pairs" else getattr(neighbors, name) for name in _NEIGHBORS_DATA]
+    static = tuple(getattr(neighbors, name) for name in _NEIGHBORS_STATIC)
+    return data, (static, derived)
+
+
+def _unflatten_neighbors(aux, data) -> Neighbors:
+    static, derived = aux
+    fields = dict(zip(_NEIGHBORS_DATA, data, strict=True))
+    fields.update(zip(_NEIGHBORS_STATIC, static, strict=True))
+    pairs = dict(fields["pairs"])
+    for i, j in derived:
+        start, stop = fields["blocks"][i]
+        pairs[(i, j)] = PairList(fields["search"].idx, None, stop - start, stop - start)
+    fields["pairs"] = {k: pairs[k] for k in sorted(pairs)}
+    return Neighbors(**fields)
+
+
+jax.tree_util.register_pytree_node(Neighbors, _flatten_neighbors, _unflatten_neighbors)
 
 
 #: compact a list's rows when at most this fraction of them has neighbours
