@@ -84,10 +84,10 @@ class Model:
         equal (2,640 particles: two blocks of 1,320).
       pair_loop: ``"xla"`` (default) evaluates every pair sum in XLA, each pair from
         both sides; ``"native"`` evaluates a fluid's density and momentum sums (its
-        own each pair once, and against walls, solids, bodies and open boundaries, with
-        the walls' pressure extrapolation) and an elastic solid's deformation gradient
-        and momentum (eqs. 16 and 14, first-order gradient correction, with or without
-        the penalty force) with the compiled loops of
+        own each pair once, found through a grid of cells, and against walls, solids,
+        bodies and open boundaries, with the walls' pressure extrapolation) and an
+        elastic solid's deformation gradient and momentum (eqs. 16 and 14, first-order
+        gradient correction, with or without the penalty force) with the compiled loops of
         :mod:`sphjax.native` (threads over rows; the CPU only, built with the machine's
         C++ compiler at first use), and
         rebuilds the neighbour list with its compiled cell list (the same list as
