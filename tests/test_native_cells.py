@@ -15,7 +15,12 @@ import pytest
 
 import sphjax
 from sphjax import native
+from sphjax.core.kernels import WendlandC2
+from sphjax.core.model import Domain
+from sphjax.neighbors.lists import PairList
+from sphjax.physics import pairs as pair_sums
 from sphjax.physics import rhs
+from sphjax.physics.fluid.density import _kernel_summand
 
 pytestmark = pytest.mark.skipif(
     native.compiler() is None, reason="no C++ compiler to build sphjax.native"
@@ -119,3 +124,41 @@ def test_a_float32_run_follows_the_list_loop(monkeypatch):
     (x_cells, v_cells), (x_list, v_list) = run(True), run(False)
     assert np.abs(x_cells - x_list).max() < 1e-5
     assert relative(v_cells, v_list) < 1e-4
+
+
+def _two_clusters(gap: float):
+    """Two 20 x 20 lattices of particles (spacing 1, h = 1.2, support 2.4: Wendland C2)
+    ``gap`` apart along x in a walled box, their masses uneven, and their dense
+    neighbour list by brute force (``[N, K]``, padded with ``N``)."""
+    side = np.arange(20.0)
+    block = np.stack(np.meshgrid(side, side, indexing="ij"), -1).reshape(-1, 2)
+    block = block + 0.2 * np.sin(3.0 * block[:, ::-1])
+    x = np.concatenate([block, block + [gap + 20.0, 0.0]])
+    n, cutoff = len(x), 2.4
+    near = np.sum((x[:, None] - x[None]) ** 2, -1) < cutoff**2
+    np.fill_diagonal(near, False)
+    width = int(near.sum(1).max())
+    idx = np.full((n, width), n, np.int32)
+    for a in range(n):
+        found = np.flatnonzero(near[a])
+        idx[a, : len(found)] = found
+    domain = Domain((-10.0, -10.0), (gap + 50.0, 30.0), (False, False))
+    geometry = pair_sums.Geometry(WendlandC2(), 1.2, 2, cutoff, domain)
+    rows = {"x": jnp.asarray(x), "m": jnp.asarray(1.0 + 0.1 * np.cos(x[:, 0]))}
+    return rows, jnp.asarray(idx), geometry
+
+
+@pytest.mark.parametrize("gap", [5.0, 1.0e7])
+def test_the_grid_spans_the_particles_or_the_list_runs(gap, monkeypatch):
+    """Two clusters 5 apart: the grid spans both (the loops differ in their last bits);
+    1e7 apart: a grid over both would need far more than 4 N + 4096 cells, so the loop
+    over the list runs (bit for bit).  Either way the kernel sum is XLA's to 1e-13."""
+    rows, idx, geometry = _two_clusters(gap)
+    pairs = PairList(idx, None, idx.shape[0], idx.shape[0])
+    xla = pair_sums.pair_sum(_kernel_summand, rows, None, pairs, geometry, weight="m")
+    sums = {}
+    for cells in ("1", "0"):
+        monkeypatch.setenv("SPHJAX_NATIVE_CELLS", cells)
+        sums[cells] = np.asarray(jax.block_until_ready(native.kernel_sum(rows, idx, geometry)))
+        assert relative(sums[cells], xla) < 1e-13
+    assert np.array_equal(sums["1"], sums["0"]) == (gap > 1e6)
