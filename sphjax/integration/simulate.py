@@ -271,16 +271,17 @@ def _run_until_stopped(carry, frames, dt, params, start, stop, *, model, save_ev
         slot, phase = jnp.divmod(step - start, save_every)
         saved = (phase == 0) & (slot > 0) & ~lost
         slot = jnp.clip(slot - 1, 0, frames.position.shape[0] - 1)
-        frames = jax.tree_util.tree_map(
-            lambda buffer, x: jax.lax.dynamic_update_index_in_dim(
-                buffer,
-                jnp.where(saved, x, jax.lax.dynamic_index_in_dim(buffer, slot, keepdims=False)),
-                slot,
-                0,
-            ),
-            frames,
-            state,
-        )
+
+        def save(frames):
+            return jax.tree_util.tree_map(
+                lambda buffer, x: jax.lax.dynamic_update_index_in_dim(buffer, x, slot, 0),
+                frames,
+                state,
+            )
+
+        # (a frame written only in the steps that save one: selecting the old slot or the
+        # state in every step would read and write the whole state each step)
+        frames = jax.lax.cond(saved, save, lambda frames: frames, frames)
         return (state, stepped[1], failure, step), frames
 
     return jax.lax.while_loop(running, one_step, (carry, frames))
