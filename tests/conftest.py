@@ -8,6 +8,8 @@ import collections
 import gc
 import json
 import os
+import subprocess
+import sys
 import time
 import warnings
 from importlib.metadata import version
@@ -146,6 +148,31 @@ def _count_compile_time(event, duration, **kwargs):
 
 
 jax.monitoring.register_event_duration_secs_listener(_count_compile_time)
+
+
+# sphjax.native's loops are built with the machine's C++ compiler the first time a test
+# needs them (about a minute on 2 cores), under a lock that the other worker waits on too.
+# With workers, the controller starts that build in the background when the session
+# starts, so that the workers run their first files (the costliest, XLA only) meanwhile.
+_native_build: list = []
+
+
+def pytest_sessionstart(session):
+    config = session.config
+    if hasattr(config, "workerinput") or not getattr(config.option, "numprocesses", None):
+        return
+    from sphjax import native
+
+    if native.compiler() is not None:
+        build = [sys.executable, "-c", "from sphjax import native; native.library()"]
+        _native_build.append(
+            subprocess.Popen(build, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        )
+
+
+def pytest_unconfigure(config):
+    for process in _native_build:
+        process.wait()
 
 
 def pytest_sessionfinish(session):
