@@ -151,7 +151,6 @@ struct Sorted {
   std::vector<int32_t> order;
   std::vector<int64_t> key, start, next;  // each particle's cell; each cell's first place
   std::vector<T> x, fields, sums;
-  int64_t stride;
 };
 
 // The sum of Term over every pair within the cutoff of the positions x [n, D], each pair
