@@ -153,63 +153,97 @@ struct Sorted {
   std::vector<T> x, fields, sums;
 };
 
+// 1. The grid of the positions x [n, D] (false where none serves: grid_for), the
+// counting sort into its cells (axis 0 fastest) and the positions in cell order, wrapped
+// into the box on periodic axes (the cell is that of the wrapped position, which the
+// pairs see); the keys and the copies shared between the threads.  Of T and D only: one
+// compiled copy for every Term and kernel.
+template <typename T, int D>
+bool sort_into_cells(ffi::ThreadPool* pool, const Setting<T>& s, const T* x, int64_t n,
+                     int64_t threads, CellGrid* g, Sorted<T>* at) {
+  constexpr int L = 32 / sizeof(T);
+  if (!grid_for<T, D>(s, x, n, g)) return false;
+  const int64_t cells = g->count(), stride = n + L;
+  T period[D], inverse[D];
+  for (int i = 0; i < D; i++) period[i] = T(g->period[i]), inverse[i] = T(g->inverse_period[i]);
+  auto wrapped = [&](int64_t a, int i) {
+    const T u = x[a * D + i];
+    return u - period[i] * std::floor(u * inverse[i]);
+  };
+  at->key.resize(n);
+  int64_t* key = at->key.data();
+  const CellGrid grid = *g;
+  in_parallel(pool, threads, [&, key](int64_t t) {
+    for (int64_t a = n * t / threads; a < n * (t + 1) / threads; a++) {
+      int64_t k = 0;
+      for (int i = D - 1; i >= 0; i--) {
+        const double u = (double(wrapped(a, i)) - grid.origin[i]) * grid.inverse_width[i];
+        k = k * grid.cells[i] + std::clamp<int64_t>(int64_t(u), 0, grid.cells[i] - 1);
+      }
+      key[a] = k;
+    }
+  });
+  at->start.assign(cells + 1, 0);
+  for (int64_t a = 0; a < n; a++) at->start[key[a] + 1]++;
+  for (int64_t c = 0; c < cells; c++) at->start[c + 1] += at->start[c];
+  at->next.assign(at->start.begin(), at->start.end() - 1);
+  at->order.resize(n);
+  for (int64_t a = 0; a < n; a++) at->order[at->next[key[a]]++] = static_cast<int32_t>(a);
+  at->x.resize(D * stride);
+  const int32_t* order = at->order.data();
+  T* xs = at->x.data();
+  in_parallel(pool, threads, [&, order, xs](int64_t t) {
+    for (int64_t j = stride * t / threads; j < stride * (t + 1) / threads; j++) {
+      const int64_t a = order[std::min(j, n - 1)];  // (past n: copies of the last)
+      for (int i = 0; i < D; i++) xs[i * stride + j] = wrapped(a, i);
+    }
+  });
+  return true;
+}
+
+// The Term's fields in cell order and its sums zeroed (of T, D and the Term: one compiled
+// copy for the four kernels)
+template <typename T, int D, typename Term>
+void fields_into_cells(ffi::ThreadPool* pool, int64_t n, int64_t threads, const Term& term,
+                       Sorted<T>* at) {
+  constexpr int W = Term::width, F = Term::fields;
+  constexpr int L = 32 / sizeof(T);
+  const int64_t stride = n + L;
+  at->fields.resize(std::max(F, 1) * stride);
+  at->sums.resize(W * stride);
+  const int32_t* order = at->order.data();
+  T *fs = at->fields.data(), *sums = at->sums.data();
+  in_parallel(pool, threads, [&, order, fs, sums](int64_t t) {
+    for (int64_t j = stride * t / threads; j < stride * (t + 1) / threads; j++) {
+      term.load(order[std::min(j, n - 1)], fs + j, stride);
+      for (int w = 0; w < W; w++) sums[w * stride + j] = T(0);
+    }
+  });
+}
+
+// The sums in cell order back into the particles' order, out [n, W]
+template <typename T, int W>
+void out_of_cells(const Sorted<T>& at, int64_t n, T* out) {
+  constexpr int L = 32 / sizeof(T);
+  const int64_t stride = n + L;
+  for (int64_t j = 0; j < n; j++)
+    for (int w = 0; w < W; w++) out[int64_t(at.order[j]) * W + w] = at.sums[w * stride + j];
+}
+
 // The sum of Term over every pair within the cutoff of the positions x [n, D], each pair
 // once, into out [n, width]; false (nothing done) where no grid serves (grid_for).
 template <typename T, int D, int Kernel, typename Term>
 bool cell_blocked(ffi::ThreadPool* pool, const Setting<T>& s, const T* x, int64_t n, T* out,
                   const Term& term) {
-  constexpr int W = Term::width, F = Term::fields;
+  constexpr int W = Term::width;
   constexpr int L = 32 / sizeof(T);  // numbers per 256-bit vector
-  CellGrid g;
-  if (!grid_for<T, D>(s, x, n, &g)) return false;
-  const int R = g.reach;
-
-  // 1. counting sort into cells (axis 0 fastest), then the copies into cell order (the
-  // cells and the copies shared between the threads)
   thread_local Sorted<T> at;  // kept between calls: no new pages each step
-  const int64_t cells = g.count(), stride = n + L;
   const int64_t threads = thread_count(pool, n);
-  // a position on a periodic axis wrapped into the box, the same in both passes (the
-  // cell is that of the wrapped position, which the pairs see)
-  T period[D], inverse[D];
-  for (int i = 0; i < D; i++) period[i] = T(g.period[i]), inverse[i] = T(g.inverse_period[i]);
-  auto wrapped = [&](int64_t a, int i) {
-    const T u = x[a * D + i];
-    return u - period[i] * std::floor(u * inverse[i]);
-  };
-  at.key.resize(n);
-  int64_t* key = at.key.data();
-  in_parallel(pool, threads, [&, key](int64_t t) {
-    for (int64_t a = n * t / threads; a < n * (t + 1) / threads; a++) {
-      int64_t k = 0;
-      for (int i = D - 1; i >= 0; i--) {
-        const double u = (double(wrapped(a, i)) - g.origin[i]) * g.inverse_width[i];
-        k = k * g.cells[i] + std::clamp<int64_t>(int64_t(u), 0, g.cells[i] - 1);
-      }
-      key[a] = k;
-    }
-  });
-  at.start.assign(cells + 1, 0);
-  for (int64_t a = 0; a < n; a++) at.start[key[a] + 1]++;
-  for (int64_t c = 0; c < cells; c++) at.start[c + 1] += at.start[c];
-  at.next.assign(at.start.begin(), at.start.end() - 1);
-  at.order.resize(n);
-  for (int64_t a = 0; a < n; a++) at.order[at.next[key[a]]++] = static_cast<int32_t>(a);
-  at.x.resize(D * stride);
-  at.fields.resize(std::max(F, 1) * stride);
-  at.sums.resize(W * stride);
-  {
-    const int32_t* order = at.order.data();
-    T *xs = at.x.data(), *fs = at.fields.data(), *sums = at.sums.data();
-    in_parallel(pool, threads, [&, order, xs, fs, sums](int64_t t) {
-      for (int64_t j = stride * t / threads; j < stride * (t + 1) / threads; j++) {
-        const int64_t a = order[std::min(j, n - 1)];  // (past n: copies of the last)
-        for (int i = 0; i < D; i++) xs[i * stride + j] = wrapped(a, i);
-        term.load(a, fs + j, stride);
-        for (int w = 0; w < W; w++) sums[w * stride + j] = T(0);
-      }
-    });
-  }
+  CellGrid g;
+  if (!sort_into_cells<T, D>(pool, s, x, n, threads, &g, &at)) return false;
+  fields_into_cells<T, D>(pool, n, threads, term, &at);
+  const int R = g.reach;
+  const int64_t cells = g.count(), stride = n + L;
 
   // 2. the pairs, slice by slice of the slowest axis
   const int64_t* start = at.start.data();
@@ -271,21 +305,17 @@ bool cell_blocked(ffi::ThreadPool* pool, const Setting<T>& s, const T* x, int64_
     }
   };
   const int64_t stripes = std::min<int64_t>(threads, std::max<int64_t>(1, slices / (2 * R)));
-  if (stripes == 1) {
-    over(0, slices);
-  } else {
-    auto stripe = [&](int64_t t, bool last) {
-      const int64_t lo = slices * t / stripes, hi = slices * (t + 1) / stripes;
-      if (last) over(hi - R, hi);
-      else over(lo, hi - R);
-    };
-    in_parallel(pool, stripes, [&](int64_t t) { stripe(t, false); });
-    in_parallel(pool, stripes, [&](int64_t t) { stripe(t, true); });
-  }
+  // (one stripe: its slices in order, in two calls)
+  auto stripe = [&](int64_t t, bool last) {
+    const int64_t lo = slices * t / stripes, hi = slices * (t + 1) / stripes;
+    const int64_t middle = std::max(lo, hi - R);
+    if (last) over(middle, hi);
+    else over(lo, middle);
+  };
+  for (const bool last : {false, true})
+    in_parallel(pool, stripes, [&, last](int64_t t) { stripe(t, last); });
 
-  // 3. back into the particles' order
-  for (int64_t j = 0; j < n; j++)
-    for (int w = 0; w < W; w++) out[int64_t(order[j]) * W + w] = at.sums[w * stride + j];
+  out_of_cells<T, W>(at, n, out);
   return true;
 }
 

@@ -20,8 +20,10 @@ namespace sphjax_native {
 // start: XLA may run two of our calls at once on its only two threads, and each waiting
 // for the other's pool would never return.  A helper that starts after every part is
 // taken returns at once, touching only the shared counters (kept alive by the helpers).
-template <typename Body>
-void in_parallel(xla::ffi::ThreadPool* pool, int64_t threads, Body body) {
+// The body is called through a plain function pointer, so this machinery is compiled once
+// for every loop, not once per loop (it was most of the library's code and build time).
+inline void in_parallel_erased(xla::ffi::ThreadPool* pool, int64_t threads,
+                               void (*call)(void*, int64_t), void* body) {
   struct Parts {
     std::atomic<int64_t> next{0};
     int64_t done = 0;
@@ -29,18 +31,24 @@ void in_parallel(xla::ffi::ThreadPool* pool, int64_t threads, Body body) {
     std::condition_variable finished;
   };
   auto parts = std::make_shared<Parts>();
-  Body* work = &body;
-  auto take = [threads](const std::shared_ptr<Parts>& parts, Body* work) {
+  auto take = [threads, call, body](const std::shared_ptr<Parts>& parts) {
     for (int64_t t = parts->next.fetch_add(1); t < threads; t = parts->next.fetch_add(1)) {
-      (*work)(t);
+      call(body, t);
       std::lock_guard<std::mutex> lock(parts->mutex);
       if (++parts->done == threads) parts->finished.notify_one();
     }
   };
-  for (int64_t t = 1; t < threads; t++) pool->Schedule([parts, work, take] { take(parts, work); });
-  take(parts, work);
+  for (int64_t t = 1; t < threads; t++) pool->Schedule([parts, take] { take(parts); });
+  take(parts);
   std::unique_lock<std::mutex> lock(parts->mutex);
   parts->finished.wait(lock, [&] { return parts->done == threads; });
+}
+
+// body(t) for t < threads (in_parallel_erased with the body's type restored)
+template <typename Body>
+void in_parallel(xla::ffi::ThreadPool* pool, int64_t threads, Body body) {
+  in_parallel_erased(
+      pool, threads, [](void* b, int64_t t) { (*static_cast<Body*>(b))(t); }, &body);
 }
 
 // How many threads share n rows: XLA's pool's size (at most $SPHJAX_NATIVE_THREADS), at
