@@ -16,8 +16,9 @@ Wendland C2), ``plate_penalty`` (the same with Ganzenmüller's penalty force, al
 and the ratios (xla / native: above 1 means the native loops are faster), and the load
 average before and after.  ``--baseline DIR`` also runs ``pair_loop="native"`` with the
 sphjax of another checkout (e.g. a git worktree of an earlier commit), alternating with
-the others, and adds its figures and the ratio baseline / native.  A benchmark reports;
-it asserts nothing.
+the others, and adds its figures and the ratio baseline / native; ``--native-only`` leaves
+out the XLA runs (the 3D case's take minutes), so that only the two checkouts' native
+loops are compared.  A benchmark reports; it asserts nothing.
 """
 
 from __future__ import annotations
@@ -94,6 +95,21 @@ def load() -> str:
         return " ".join(f.read().split()[:3])
 
 
+def _against_xla(cases, best) -> None:
+    """The table of each case's two pair loops (best of the rounds)."""
+    print(
+        "\n| case | particles | xla wall (CPU) ms | native wall (CPU) ms | wall ratio | CPU ratio |"
+    )
+    print("|---|---:|---:|---:|---:|---:|")
+    for case in cases:
+        x, n = best[(case, "xla")], best[(case, "native")]
+        print(
+            f"| {case} | {x['n']} | {1e3 * x['wall']:.2f} ({1e3 * x['cpu']:.2f}) | "
+            f"{1e3 * n['wall']:.2f} ({1e3 * n['cpu']:.2f}) | {x['wall'] / n['wall']:.2f} | "
+            f"{x['cpu'] / n['cpu']:.2f} |"
+        )
+
+
 def main(argv=None) -> dict:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--cases", nargs="+", default=["tg40k", "dam"], choices=CASES)
@@ -105,11 +121,18 @@ def main(argv=None) -> dict:
         metavar="DIR",
         help="also time pair_loop='native' with the sphjax of this checkout",
     )
+    p.add_argument(
+        "--native-only",
+        action="store_true",
+        help="with --baseline: leave out the XLA runs, compare the two native loops",
+    )
     args = p.parse_args(argv)
+    if args.native_only and args.baseline is None:
+        p.error("--native-only compares with --baseline DIR: give both")
     if args.steps < 1 or args.repeats < 1 or args.rounds < 1:
         p.error("--steps, --repeats and --rounds: give positive numbers")
     baseline = None if args.baseline is None else os.path.abspath(args.baseline)
-    loops = LOOPS + (() if baseline is None else ("native@baseline",))
+    loops = LOOPS[args.native_only :] + (() if baseline is None else ("native@baseline",))
     print(f"load average before: {load()}", flush=True)
     best: dict = {}
     for _ in range(args.rounds):
@@ -126,17 +149,8 @@ def main(argv=None) -> dict:
                     flush=True,
                 )
     print(f"load average after: {load()}")
-    print(
-        "\n| case | particles | xla wall (CPU) ms | native wall (CPU) ms | wall ratio | CPU ratio |"
-    )
-    print("|---|---:|---:|---:|---:|---:|")
-    for case in args.cases:
-        x, n = best[(case, "xla")], best[(case, "native")]
-        print(
-            f"| {case} | {x['n']} | {1e3 * x['wall']:.2f} ({1e3 * x['cpu']:.2f}) | "
-            f"{1e3 * n['wall']:.2f} ({1e3 * n['cpu']:.2f}) | {x['wall'] / n['wall']:.2f} | "
-            f"{x['cpu'] / n['cpu']:.2f} |"
-        )
+    if not args.native_only:
+        _against_xla(args.cases, best)
     if baseline is not None:
         print(f"\nbaseline: pair_loop='native' with the sphjax of {baseline}")
         print("\n| case | baseline wall (CPU) ms | native wall (CPU) ms | wall ratio | CPU ratio |")

@@ -1,7 +1,7 @@
 // A cell-blocked pair loop: a sum within one system over every pair closer than the
 // cutoff, found through a grid of cells instead of a neighbour list.
 //
-// The particles are sorted into cells at least cutoff / R wide (R = 2 in 2D, 1 in 3D)
+// The particles are sorted into cells at least cutoff / R wide (R = 2: half the support)
 // and their positions and the Term's fields copied into cell order, one array per field,
 // so that the cells of one row of the grid (axis 0 fastest) hold one contiguous run of
 // particles.  A particle a meets the half shell of its cell (the rest of its own cell
@@ -50,7 +50,7 @@ struct CellGrid {
 // cutoff / R, so rounding never puts a pair inside the support more than R cells apart.
 template <typename T, int D>
 bool grid_for(const Setting<T>& s, const T* x, int64_t n, CellGrid* g) {
-  g->reach = D == 2 ? 2 : 1;
+  g->reach = 2;
   const double width = double(s.cutoff) / g->reach * (1 + 1e-4);
   if (!(width > 0) || n == 0) return false;
   double total = 1;
