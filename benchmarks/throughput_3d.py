@@ -19,6 +19,10 @@ neighbour-list allocation), then ``--repeats`` runs of ``--steps`` steps.
 
     python benchmarks/throughput_3d.py                       # 32^3, sphjax and JAX-SPH
     python benchmarks/throughput_3d.py --sizes 32 64 --steps 10
+    python benchmarks/throughput_3d.py --pair-loops xla native   # both of sphjax's loops
+
+``--pair-loops`` picks sphjax's pair sums (``Model.pair_loop``: ``xla``, the default, and/or
+``native``, the compiled loops; each a row of its own).
 """
 
 from __future__ import annotations
@@ -45,8 +49,11 @@ from throughput import (  # noqa: E402
 )
 
 
-def run_sphjax(n: int, steps: int, repeats: int) -> dict:
-    """Time ``sphjax.simulate`` on the ABC flow with ``n^3`` particles (in-process)."""
+def run_sphjax(n: int, steps: int, repeats: int, pair_loop: str = "xla") -> dict:
+    """Time ``sphjax.simulate`` on the ABC flow with ``n^3`` particles (in-process), its
+    pair sums by ``pair_loop``."""
+    import dataclasses
+
     import jax
 
     import sphjax
@@ -55,6 +62,7 @@ def run_sphjax(n: int, steps: int, repeats: int) -> dict:
     case = sphjax.cases.abc_flow_3d(
         n=n, kernel="quintic_spline", h_factor=1.0, transport_velocity=False, relax_iterations=0
     )
+    case = case.replace(model=dataclasses.replace(case.model, pair_loop=pair_loop))
     speed = ABC_MAX_SPEED * case.info["speed"]
     dt = 0.25 * case.model.smoothing_length / (float(case.params.sound_speed) + speed)
 
@@ -64,7 +72,7 @@ def run_sphjax(n: int, steps: int, repeats: int) -> dict:
 
     warmup, seconds, cpu_seconds = timed_runs(run, repeats)
     return dict(
-        code="sphjax",
+        code="sphjax" if pair_loop == "xla" else f"sphjax-{pair_loop}",
         n_particles=case.n_particles,
         steps=steps,
         seconds=seconds,
@@ -102,6 +110,13 @@ def main(argv=None):
     parser.add_argument("--peers", default="jax-sph", help="'jax-sph' or 'none'")
     parser.add_argument("--jaxsph-python", help="python of the JAX-SPH venv")
     parser.add_argument("--json", type=Path, help="also write all raw results here")
+    parser.add_argument(
+        "--pair-loops",
+        nargs="+",
+        default=["xla"],
+        choices=["xla", "native"],
+        help="sphjax's pair sums (Model.pair_loop), a row each",
+    )
     args = parser.parse_args(argv)
     for n in args.sizes:
         if n < 8:
@@ -120,7 +135,13 @@ def main(argv=None):
     raw, rows = [], []
     for n in args.sizes:
         row = {}
-        jobs = [("sphjax", lambda n=n: run_sphjax(n, args.steps, args.repeats))]
+        jobs = [
+            (
+                "sphjax" if loop == "xla" else f"sphjax-{loop}",
+                lambda n=n, loop=loop: run_sphjax(n, args.steps, args.repeats, loop),
+            )
+            for loop in args.pair_loops
+        ]
         if python:
             jobs.append(("jax-sph", lambda n=n: run_jaxsph(python, n, args.steps, args.repeats)))
         for name, job in jobs:
@@ -134,7 +155,7 @@ def main(argv=None):
             wall = ", ".join(f"{rate(result, s) / 1e6:.4f}" for s in result["seconds"])
             cpu = ", ".join(f"{rate(result, s) / 1e6:.4f}" for s in result["cpu_seconds"])
             print(
-                f"  {name:8s} {result['n_particles']:7d} particles: {wall} M particle-steps/s; "
+                f"  {name:13s} {result['n_particles']:7d} particles: {wall} M particle-steps/s; "
                 f"per CPU-s {cpu} (warm-up {result['warmup_s']:.1f} s)",
                 flush=True,
             )
@@ -145,11 +166,11 @@ def main(argv=None):
     for row in rows:
         for name, s in row.items():
             ratio = ""
-            if name == "sphjax" and "jax-sph" in row:
+            if name.startswith("sphjax") and "jax-sph" in row:
                 peer = row["jax-sph"]
                 ratio = f"{s['median'] / peer['median']:.2f}x ({s['cpu'] / peer['cpu']:.2f}x)"
             print(
-                f"{name:8s} {s['n_particles']:8d} {s['median'] / 1e6:9.4f} {s['cpu'] / 1e6:9.4f}"
+                f"{name:13s} {s['n_particles']:8d} {s['median'] / 1e6:9.4f} {s['cpu'] / 1e6:9.4f}"
                 f"  {ratio:>15s}   {s['note']}"
             )
     if args.json:
