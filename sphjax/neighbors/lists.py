@@ -168,18 +168,29 @@ _NEIGHBORS_STATIC = (
 _NEIGHBORS_DATA = ("search", "pairs", "overflow", "reference", "skin", "support_origin", "counts")
 
 
+def _search_list(search, block) -> PairList:
+    """The list of a system alone in the search (rows ``block``): the search's own list
+    (:func:`_split`, and :func:`_unflatten_neighbors` making it again)."""
+    n = block[1] - block[0]
+    return PairList(search.idx.astype(jnp.int32), None, n, n)
+
+
 def _search_lists(neighbors: Neighbors) -> tuple:
     """The keys of ``neighbors.pairs`` whose lists are the search's own (:func:`_split`:
-    a system in the current configuration whose list is neither split, compacted nor
-    kept at two levels)."""
+    a non-empty system in the current configuration whose list is neither split,
+    compacted nor kept at two levels)."""
     if neighbors.search is None:
         return ()
     kept = dict(neighbors.capacities) | dict(neighbors.member_capacities)
     kept |= dict(neighbors.support_capacities)
+    blocks = neighbors.blocks
     return tuple(
         (i, j)
         for i, j in neighbors.pairs
-        if i == j and neighbors.plan.current[i] and (i, j) not in kept
+        if i == j
+        and neighbors.plan.current[i]
+        and blocks[i][1] > blocks[i][0]
+        and (i, j) not in kept
     )
 
 
@@ -197,8 +208,7 @@ def _unflatten_neighbors(aux, data) -> Neighbors:
     fields.update(zip(_NEIGHBORS_STATIC, static, strict=True))
     pairs = dict(fields["pairs"])
     for i, j in derived:
-        start, stop = fields["blocks"][i]
-        pairs[(i, j)] = PairList(fields["search"].idx, None, stop - start, stop - start)
+        pairs[(i, j)] = _search_list(fields["search"], fields["blocks"][i])
     fields["pairs"] = {k: pairs[k] for k in sorted(pairs)}
     return Neighbors(**fields)
 
@@ -426,8 +436,7 @@ def _split(neighbors: Neighbors) -> dict:
             else:
                 out[(i, j)] = PairList(forward, backward, n_i, n_j)
         elif i == j and neighbors.plan.current[i] and blocks[i][1] > blocks[i][0]:
-            n = blocks[i][1] - blocks[i][0]
-            out[(i, j)] = PairList(idx.astype(jnp.int32), None, n, n)
+            out[(i, j)] = _search_list(neighbors.search, blocks[i])
     return out
 
 
