@@ -53,6 +53,9 @@ def test_neighbours_rebuilt_from_their_leaves_are_the_same(name, support):
     leaves, tree = jax.tree_util.tree_flatten(before)
     same_lists(jax.tree_util.tree_unflatten(tree, leaves), before)
     same_lists(jax.jit(lambda n: n)(before), before)
+    # JAX also builds trees of other leaves (axes, None: vmap's in_axes, checkpointing)
+    specs = jax.tree_util.tree_unflatten(tree, [None] * len(leaves))
+    assert jax.tree_util.tree_leaves(specs) == []
 
 
 def test_a_fluid_alone_in_the_search_stores_its_list_once():

@@ -168,11 +168,12 @@ _NEIGHBORS_STATIC = (
 _NEIGHBORS_DATA = ("search", "pairs", "overflow", "reference", "skin", "support_origin", "counts")
 
 
-def _search_list(search, block) -> PairList:
+def _search_list(idx, block) -> PairList:
     """The list of a system alone in the search (rows ``block``): the search's own list
-    (:func:`_split`, and :func:`_unflatten_neighbors` making it again)."""
+    ``idx`` (:func:`_split`, and :func:`_unflatten_neighbors` making it again, where
+    ``idx`` may be any leaf JAX puts in a tree: an axis, ``None``; so it is used as is)."""
     n = block[1] - block[0]
-    return PairList(search.idx.astype(jnp.int32), None, n, n)
+    return PairList(idx, None, n, n)
 
 
 def _search_lists(neighbors: Neighbors) -> tuple:
@@ -208,7 +209,7 @@ def _unflatten_neighbors(aux, data) -> Neighbors:
     fields.update(zip(_NEIGHBORS_STATIC, static, strict=True))
     pairs = dict(fields["pairs"])
     for i, j in derived:
-        pairs[(i, j)] = _search_list(fields["search"], fields["blocks"][i])
+        pairs[(i, j)] = _search_list(fields["search"].idx, fields["blocks"][i])
     fields["pairs"] = {k: pairs[k] for k in sorted(pairs)}
     return Neighbors(**fields)
 
@@ -436,7 +437,7 @@ def _split(neighbors: Neighbors) -> dict:
             else:
                 out[(i, j)] = PairList(forward, backward, n_i, n_j)
         elif i == j and neighbors.plan.current[i] and blocks[i][1] > blocks[i][0]:
-            out[(i, j)] = _search_list(neighbors.search, blocks[i])
+            out[(i, j)] = _search_list(idx, blocks[i])  # (the search's list is int32)
     return out
 
 
